@@ -1,0 +1,27 @@
+#include <cstdio>
+#include <exception>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "apps/commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"mcslam: monocular SLAM by Monte Carlo pose and structure estimation"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "mcslam 0.1.0");
+  bool verbose = false;
+  app.add_flag("-v,--verbose", verbose, "Log debug messages");
+  app.parse_complete_callback([&] { spdlog::set_level(verbose ? spdlog::level::debug : spdlog::level::info); });
+  mcslam::apps::RegisterSynth(app);
+  mcslam::apps::RegisterEval(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mcslam: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,123 @@
+#include "core/camera.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <fmt/format.h>
+
+namespace mcslam {
+
+PinholeCamera::PinholeCamera(double fx_, double fy_, double cx_, double cy_, int width_, int height_, Distortion d)
+    : fx(fx_), fy(fy_), cx(cx_), cy(cy_), width(width_), height(height_), dist(d) {}
+
+void PinholeCamera::Check() const {
+  auto finite = [](double v) { return std::isfinite(v); };
+  if (!finite(fx) || fx <= 0) throw std::invalid_argument(fmt::format("camera: fx must be positive, got {}", fx));
+  if (!finite(fy) || fy <= 0) throw std::invalid_argument(fmt::format("camera: fy must be positive, got {}", fy));
+  if (!finite(cx) || !finite(cy)) throw std::invalid_argument(fmt::format("camera: cx, cy must be finite, got {}, {}", cx, cy));
+  if (width <= 0 || height <= 0)
+    throw std::invalid_argument(fmt::format("camera: image size must be positive, got {}x{}", width, height));
+  for (double v : {dist.k1, dist.k2, dist.p1, dist.p2, dist.k3})
+    if (!finite(v)) throw std::invalid_argument("camera: distortion coefficients must be finite");
+}
+
+Eigen::Matrix3d PinholeCamera::K() const {
+  Eigen::Matrix3d k;
+  k << fx, 0, cx, 0, fy, cy, 0, 0, 1;
+  return k;
+}
+
+Eigen::Vector2d PinholeCamera::NormalizedToPixel(const Eigen::Vector2d& n) const {
+  return {fx * n.x() + cx, fy * n.y() + cy};
+}
+
+Eigen::Vector2d PinholeCamera::PixelToNormalized(const Eigen::Vector2d& p) const {
+  return {(p.x() - cx) / fx, (p.y() - cy) / fy};
+}
+
+Eigen::Vector2d PinholeCamera::Distort(const Eigen::Vector2d& n, Eigen::Matrix2d* J) const {
+  const double x = n.x(), y = n.y();
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + r2 * (dist.k1 + r2 * (dist.k2 + r2 * dist.k3));
+  const double xd = x * radial + 2.0 * dist.p1 * x * y + dist.p2 * (r2 + 2.0 * x * x);
+  const double yd = y * radial + dist.p1 * (r2 + 2.0 * y * y) + 2.0 * dist.p2 * x * y;
+  if (J) {
+    const double dradial_dr2 = dist.k1 + r2 * (2.0 * dist.k2 + 3.0 * dist.k3 * r2);
+    const double dr_dx = 2.0 * x * dradial_dr2, dr_dy = 2.0 * y * dradial_dr2;
+    (*J)(0, 0) = radial + x * dr_dx + 2.0 * dist.p1 * y + 6.0 * dist.p2 * x;
+    (*J)(0, 1) = x * dr_dy + 2.0 * dist.p1 * x + 2.0 * dist.p2 * y;
+    (*J)(1, 0) = y * dr_dx + 2.0 * dist.p1 * x + 2.0 * dist.p2 * y;
+    (*J)(1, 1) = radial + y * dr_dy + 6.0 * dist.p1 * y + 2.0 * dist.p2 * x;
+  }
+  return {xd, yd};
+}
+
+Eigen::Vector2d PinholeCamera::Undistort(const Eigen::Vector2d& d) const {
+  if (!HasDistortion()) return d;
+  Eigen::Vector2d n = d;  // the distortion is small near the centre: start from the distorted point
+  for (int it = 0; it < 30; ++it) {
+    Eigen::Matrix2d J;
+    const Eigen::Vector2d r = Distort(n, &J) - d;
+    if (r.squaredNorm() < 1e-28) break;
+    n -= J.inverse() * r;
+  }
+  return n;
+}
+
+bool PinholeCamera::Project(const Eigen::Vector3d& p, Eigen::Vector2d* uv_px, Eigen::Matrix<double, 2, 3>* J_point,
+                            double min_depth) const {
+  if (!(p.z() > min_depth)) return false;
+  const double iz = 1.0 / p.z();
+  const Eigen::Vector2d n(p.x() * iz, p.y() * iz);
+  Eigen::Matrix2d Jd = Eigen::Matrix2d::Identity();
+  const Eigen::Vector2d nd = HasDistortion() ? Distort(n, J_point ? &Jd : nullptr) : n;
+  if (uv_px) *uv_px = NormalizedToPixel(nd);
+  if (J_point) {
+    Eigen::Matrix<double, 2, 3> Jn;
+    Jn << iz, 0, -n.x() * iz, 0, iz, -n.y() * iz;
+    Eigen::Matrix2d F;
+    F << fx, 0, 0, fy;
+    *J_point = F * Jd * Jn;
+  }
+  return true;
+}
+
+bool PinholeCamera::ProjectWorld(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
+                                 Eigen::Vector2d* uv_px, Eigen::Matrix<double, 2, 3>* J_world,
+                                 Eigen::Matrix<double, 2, 3>* J_translation) const {
+  Eigen::Matrix<double, 2, 3> J_cam;
+  const bool want_j = J_world || J_translation;
+  if (!Project(cam_from_world * point_in_world, uv_px, want_j ? &J_cam : nullptr)) return false;
+  if (J_translation) *J_translation = J_cam;  // d(Rz + t)/dt = I
+  if (J_world) *J_world = J_cam * cam_from_world.R();
+  return true;
+}
+
+Eigen::Vector3d PinholeCamera::Unproject(const Eigen::Vector2d& uv_px) const {
+  const Eigen::Vector2d n = Undistort(PixelToNormalized(uv_px));
+  return {n.x(), n.y(), 1.0};
+}
+
+Eigen::Vector2d PinholeCamera::UndistortPixel(const Eigen::Vector2d& uv_px) const {
+  return NormalizedToPixel(Undistort(PixelToNormalized(uv_px)));
+}
+
+PinholeCamera PinholeCamera::Scaled(double f) const {
+  // Pixel centres: u' + 0.5 = f (u + 0.5)
+  PinholeCamera c = *this;
+  c.fx *= f;
+  c.fy *= f;
+  c.cx = f * (cx + 0.5) - 0.5;
+  c.cy = f * (cy + 0.5) - 0.5;
+  c.width = static_cast<int>(std::lround(width * f));
+  c.height = static_cast<int>(std::lround(height * f));
+  return c;
+}
+
+std::string PinholeCamera::ToString() const {
+  return fmt::format("pinhole {}x{} fx={} fy={} cx={} cy={} k1={} k2={} p1={} p2={} k3={}", width, height, fx, fy, cx,
+                     cy, dist.k1, dist.k2, dist.p1, dist.p2, dist.k3);
+}
+
+}  // namespace mcslam

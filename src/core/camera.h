@@ -1,0 +1,66 @@
+#pragma once
+// Pinhole camera with optional radial-tangential (Brown-Conrady / OpenCV "plumb bob") distortion.
+// Coordinates: uv_px are pixels (origin at the centre of the top-left pixel, x right, y down);
+// uv_norm are normalised image coordinates x/z, y/z, before distortion.
+#include <Eigen/Core>
+#include <string>
+
+#include "core/pose.h"
+
+namespace mcslam {
+
+struct Distortion {
+  double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
+  bool IsZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+};
+
+class PinholeCamera {
+ public:
+  PinholeCamera() = default;
+  PinholeCamera(double fx, double fy, double cx, double cy, int width, int height, Distortion dist = {});
+
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  int width = 0, height = 0;
+  Distortion dist;
+
+  // Throws std::invalid_argument naming the bad value (non-positive focal length or size, NaN, ...).
+  void Check() const;
+  bool HasDistortion() const { return !dist.IsZero(); }
+  Eigen::Matrix3d K() const;
+
+  // Without distortion: pixel = K * [uv_norm; 1], and its inverse.
+  Eigen::Vector2d NormalizedToPixel(const Eigen::Vector2d& uv_norm) const;
+  Eigen::Vector2d PixelToNormalized(const Eigen::Vector2d& uv_px) const;
+
+  // Apply the distortion model to undistorted normalised coordinates, optionally with its 2x2 Jacobian.
+  Eigen::Vector2d Distort(const Eigen::Vector2d& uv_norm, Eigen::Matrix2d* J = nullptr) const;
+  // Inverse of Distort by Gauss-Newton; exact to ~1e-12 inside the image for realistic lenses.
+  Eigen::Vector2d Undistort(const Eigen::Vector2d& uv_norm_distorted) const;
+
+  // Project a point in camera coordinates to pixels (through the distortion). Returns false when the
+  // point is not in front of the camera (z <= min_depth); outputs are then untouched.
+  // J_point: d uv_px / d point_in_cam (2x3).
+  bool Project(const Eigen::Vector3d& point_in_cam, Eigen::Vector2d* uv_px,
+               Eigen::Matrix<double, 2, 3>* J_point = nullptr, double min_depth = 1e-9) const;
+  // Project a world point through cam_from_world; J_world: d uv_px / d point_in_world,
+  // J_translation: d uv_px / d cam_from_world.t.
+  bool ProjectWorld(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world, Eigen::Vector2d* uv_px,
+                    Eigen::Matrix<double, 2, 3>* J_world = nullptr,
+                    Eigen::Matrix<double, 2, 3>* J_translation = nullptr) const;
+
+  // Ray through a (distorted) pixel as [x, y, 1] in camera coordinates.
+  Eigen::Vector3d Unproject(const Eigen::Vector2d& uv_px) const;
+  // Distorted pixel -> the pixel an ideal pinhole camera with the same K would have seen.
+  Eigen::Vector2d UndistortPixel(const Eigen::Vector2d& uv_px) const;
+
+  bool InImage(const Eigen::Vector2d& uv_px, double border = 0.0) const {
+    return uv_px.x() >= border && uv_px.y() >= border && uv_px.x() <= width - 1 - border &&
+           uv_px.y() <= height - 1 - border;
+  }
+
+  // The same camera for images scaled by `factor` (intrinsics scale, distortion does not).
+  PinholeCamera Scaled(double factor) const;
+  std::string ToString() const;
+};
+
+}  // namespace mcslam
