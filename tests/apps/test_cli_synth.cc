@@ -1,1 +1,141 @@
-#include <gtest/gtest.h>  // placeholder: being written
+// `mcslam synth`: the files it writes, read back with the io readers, and its refusals of bad flags.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <sstream>
+#include <string>
+
+#include "io/camera_io.h"
+#include "io/observations_io.h"
+#include "io/ply.h"
+#include "io/trajectory_io.h"
+#include "../test_util.h"
+
+namespace mcslam {
+namespace {
+
+using testing::ReadText;
+using testing::RunMcslam;
+using testing::TempDir;
+
+// Lines that are neither blank nor comments.
+int DataLines(const std::string& text) {
+  std::istringstream in(text);
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line)) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first != std::string::npos && line[first] != '#') ++n;
+  }
+  return n;
+}
+
+TEST(CliSynth, PaperScenarioWritesTheFourFiles) {
+  TempDir tmp;
+  const std::string out = tmp / "seq";
+  const auto r = RunMcslam("synth --scenario paper --frames 20 --out " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("20 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("400 points"), std::string::npos) << r.output;
+
+  const io::Trajectory gt = io::ReadTum(out + "/groundtruth.txt");
+  ASSERT_EQ(gt.size(), 20u);
+  EXPECT_EQ(DataLines(ReadText(out + "/groundtruth.txt")), 20);
+  for (size_t i = 0; i < gt.size(); ++i) {
+    // Stamps are i/30 s, written in full precision.
+    EXPECT_NEAR(gt.stamps_s[i], i / 30.0, 1e-12);
+    // The camera is about 3 m from the box at the origin (world_from_cam: t is the camera centre).
+    EXPECT_NEAR(gt.world_from_cam[i].t.norm(), 3.0, 0.3);
+  }
+
+  const PinholeCamera cam = io::ReadCameraYaml(out + "/camera.yaml");
+  EXPECT_EQ(cam.fx, 500.0);
+  EXPECT_EQ(cam.width, 320);
+  EXPECT_EQ(cam.height, 240);
+  EXPECT_EQ(cam.cx, 159.5);
+
+  const io::PointCloud map = io::ReadPly(out + "/map_gt.ply");
+  ASSERT_EQ(map.points.size(), 400u);
+  ASSERT_EQ(map.ids.size(), 400u);
+  for (size_t i = 0; i < map.ids.size(); ++i) EXPECT_EQ(map.ids[i], static_cast<int64_t>(i));
+
+  const std::vector<io::ObservationFrame> frames = io::ReadObservations(out + "/observations.txt");
+  ASSERT_EQ(frames.size(), 20u);
+  size_t total = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i].index, static_cast<int64_t>(i));
+    EXPECT_GE(frames[i].observations.size(), 100u);  // the scenario's promise, with 400 points
+    total += frames[i].observations.size();
+    for (const auto& ob : frames[i].observations) {
+      EXPECT_LT(ob.feature_id, 400);
+      EXPECT_TRUE(cam.InImage({ob.u_px, ob.v_px}));
+    }
+  }
+  EXPECT_EQ(DataLines(ReadText(out + "/observations.txt")), static_cast<int>(total));
+  EXPECT_NE(r.output.find(std::to_string(total) + " observations"), std::string::npos) << r.output;
+}
+
+TEST(CliSynth, SameSeedSameFilesAndNoisyOptionsWork) {
+  TempDir tmp;
+  const std::string flags = " --scenario paper --frames 10 --noise 1 --outliers 0.1 --speed 1.5 --points 300";
+  ASSERT_EQ(RunMcslam("synth" + flags + " --seed 5 --out " + tmp / "a").exit_code, 0);
+  ASSERT_EQ(RunMcslam("synth" + flags + " --seed 5 --out " + tmp / "b").exit_code, 0);
+  ASSERT_EQ(RunMcslam("synth" + flags + " --seed 6 --out " + tmp / "c").exit_code, 0);
+  for (const char* f : {"groundtruth.txt", "map_gt.ply", "camera.yaml", "observations.txt"}) {
+    EXPECT_EQ(ReadText(tmp / ("a/" + std::string(f))), ReadText(tmp / ("b/" + std::string(f)))) << f;
+  }
+  EXPECT_NE(ReadText(tmp / "a/observations.txt"), ReadText(tmp / "c/observations.txt"));
+  EXPECT_EQ(io::ReadPly(tmp / "a/map_gt.ply").points.size(), 300u);
+}
+
+TEST(CliSynth, FramesWithNothingSeenAreStillListed) {
+  // One point, and noise so large that its noisy pixel nearly always leaves the image and is dropped: most
+  // frames have no observation, yet each must be in the file (as a 2-column "index stamp" line).
+  TempDir tmp;
+  const auto r = RunMcslam("synth --frames 30 --points 1 --noise 1000 --out " + tmp / "empty");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto frames = io::ReadObservations(tmp / "empty/observations.txt");
+  ASSERT_EQ(frames.size(), 30u);
+  int empty = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i].index, static_cast<int64_t>(i));
+    EXPECT_NEAR(frames[i].stamp_s, i / 30.0, 1e-12);  // written in full precision
+    empty += frames[i].observations.empty();
+  }
+  EXPECT_GT(empty, 0);
+}
+
+void ExpectRefused(const std::string& flags, const std::string& named) {
+  TempDir tmp;
+  const auto r = RunMcslam("synth " + flags + " --out " + tmp / "x");
+  EXPECT_NE(r.exit_code, 0) << flags << "\n" << r.output;
+  EXPECT_NE(r.output.find(named), std::string::npos) << flags << "\n" << r.output;
+  EXPECT_FALSE(std::filesystem::exists(tmp / "x/observations.txt")) << flags;
+}
+
+TEST(CliSynth, BadFlagsFailNamingTheFlag) {
+  ExpectRefused("--scenario paper --noise -1", "--noise");
+  ExpectRefused("--scenario paper --outliers 1.5", "--outliers");
+  ExpectRefused("--scenario paper --outliers -0.5", "--outliers");
+  ExpectRefused("--scenario paper --frames 0", "--frames");
+  ExpectRefused("--scenario paper --points 0", "--points");
+  ExpectRefused("--scenario paper --speed 0", "--speed");
+  ExpectRefused("--scenario paper --speed -1", "--speed");
+  ExpectRefused("--scenario cube", "--scenario");
+  ExpectRefused("--noise nan", "--noise");
+  ExpectRefused("--seed -3", "--seed");
+  const auto r = RunMcslam("synth --scenario paper --frames 5");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
+}
+
+TEST(CliSynth, UnwritableOutputFolderFailsNamingIt) {
+  TempDir tmp;
+  testing::WriteText(tmp / "file", "not a folder");
+  const auto r = RunMcslam("synth --frames 2 --out " + tmp / "file/sub");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find(tmp / "file/sub"), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace mcslam
