@@ -1,4 +1,96 @@
+// `mcslam eval GT EST`: compare an estimated trajectory with ground truth and print one summary line.
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <memory>
+#include <string>
+
+#include <fmt/format.h>
+
 #include "apps/commands.h"
+#include "eval/trajectory_eval.h"
+#include "io/trajectory_io.h"
+
 namespace mcslam::apps {
-void RegisterEval(CLI::App& app) { app.add_subcommand("eval", "Evaluate a trajectory (not yet)"); }
+namespace {
+
+struct EvalArgs {
+  std::string gt_path, est_path;
+  std::string align = "sim3";
+  std::string csv_path;
+  int delta = 1;
+  double max_dt_s = eval::AssociationOptions{}.max_dt_s;
+  std::string gt_format = "auto", est_format = "auto";
+  std::string gt_times, est_times;
+};
+
+// A flag check whose message says what is wrong in words: "--max-dt: must be at least 0 (got -1)".
+CLI::Validator NumberAtLeast(double min) {
+  return CLI::Validator(
+      [min](std::string& text) -> std::string {
+        double v = 0;
+        size_t used = 0;
+        try {
+          v = std::stod(text, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used == 0 || used != text.size() || !std::isfinite(v)) return fmt::format("'{}' is not a number", text);
+        if (v < min) return fmt::format("must be at least {} (got {})", min, text);
+        return "";
+      },
+      fmt::format(">={}", min));
+}
+
+void RunEval(const EvalArgs& a) {
+  const io::Trajectory gt = io::ReadTrajectory(a.gt_path, io::ParseTrajectoryFormat(a.gt_format), a.gt_times);
+  const io::Trajectory est = io::ReadTrajectory(a.est_path, io::ParseTrajectoryFormat(a.est_format), a.est_times);
+  if (gt.has_stamps != est.has_stamps)
+    std::fprintf(stderr, "mcslam eval: note: %s has no timestamps; poses are matched by index\n",
+                 (gt.has_stamps ? a.est_path : a.gt_path).c_str());
+
+  eval::EvalOptions options;
+  options.alignment = eval::ParseAlignment(a.align);
+  options.association.max_dt_s = a.max_dt_s;
+  options.rpe_delta = a.delta;
+  const eval::TrajectoryErrors errors = eval::EvaluateTrajectory(gt, est, options);
+
+  if (errors.matched() < est.size())
+    std::fprintf(stderr, "mcslam eval: note: %zu of %zu estimated poses have no ground truth and are not scored\n",
+                 est.size() - errors.matched(), est.size());
+  if (errors.alignment_result.rotation_ambiguous)
+    std::fprintf(stderr,
+                 "mcslam eval: warning: the camera positions lie on a line; the alignment's rotation about it is "
+                 "not determined, so rotation errors are not meaningful (ATE is)\n");
+  if (!a.csv_path.empty()) eval::WriteFrameErrorsCsv(a.csv_path, errors);
+  // stdout carries exactly the summary line, so scripts can parse it.
+  std::fputs((eval::FormatSummary(errors) + "\n").c_str(), stdout);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+void RegisterEval(CLI::App& app) {
+  auto args = std::make_shared<EvalArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "eval", "Compare an estimated trajectory with ground truth: align (Umeyama), then ATE, rotation error and RPE");
+  cmd->add_option("GT", args->gt_path, "Ground-truth trajectory (TUM, KITTI or EuRoC CSV)")->required();
+  cmd->add_option("EST", args->est_path, "Estimated trajectory (TUM, KITTI or EuRoC CSV)")->required();
+  cmd->add_option("--align", args->align, "Alignment of the estimate onto the ground truth")
+      ->check(CLI::IsMember({"sim3", "se3", "none"}, CLI::ignore_case))
+      ->capture_default_str();
+  cmd->add_option("--csv", args->csv_path, "Write per-frame errors to this CSV file");
+  cmd->add_option("--delta", args->delta, fmt::format("RPE frame delta, in matched poses (default {})", args->delta))
+      ->check(NumberAtLeast(1));
+  cmd->add_option("--max-dt", args->max_dt_s,
+                  fmt::format("Largest stamp difference for a match, seconds (default {})", args->max_dt_s))
+      ->check(NumberAtLeast(0));
+  const auto formats = CLI::IsMember({"auto", "tum", "kitti", "euroc"}, CLI::ignore_case);
+  cmd->add_option("--gt-format", args->gt_format, "Ground-truth file format")->check(formats)->capture_default_str();
+  cmd->add_option("--est-format", args->est_format, "Estimate file format")->check(formats)->capture_default_str();
+  cmd->add_option("--gt-times", args->gt_times, "Times file (one stamp a line) for a KITTI ground truth");
+  cmd->add_option("--est-times", args->est_times, "Times file (one stamp a line) for a KITTI estimate");
+  cmd->callback([args] { RunEval(*args); });
+}
+
 }  // namespace mcslam::apps

@@ -1,1 +1,306 @@
-#include <gtest/gtest.h>  // placeholder: being written
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <stdexcept>
+#include <string>
+
+#include "eval/trajectory_eval.h"
+#include "../test_util.h"
+
+namespace mcslam::eval {
+namespace {
+
+using io::Trajectory;
+
+void ExpectThrowsWith(const std::function<void()>& f, const std::string& needle) {
+  try {
+    f();
+    FAIL() << "no exception; expected one containing '" << needle << "'";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+// A smooth, non-planar path with changing orientation, stamps every 0.1 s.
+Trajectory MakeGroundTruth(int n) {
+  Trajectory t;
+  for (int i = 0; i < n; ++i) {
+    const double a = 0.15 * i;
+    t.stamps_s.push_back(100.0 + 0.1 * i);
+    t.world_from_cam.emplace_back(
+        QuaternionFromRotationVector(Eigen::Vector3d(0.2 * std::sin(a), 0.3 * std::cos(a), 0.4 * a)),
+        Eigen::Vector3d(3.0 * std::cos(a), 2.0 * std::sin(a), 0.5 * std::sin(2.0 * a) + 0.05 * i));
+  }
+  return t;
+}
+
+Similarity3 KnownSim3() {
+  Similarity3 s;
+  s.scale = 2.5;
+  s.rotation = QuaternionFromRotationVector(Eigen::Vector3d(0.4, -1.1, 0.7)).toRotationMatrix();
+  s.translation = Eigen::Vector3d(1.5, -20.0, 3.25);
+  return s;
+}
+
+// The estimate that KnownSim3() maps onto `gt`: p_est = R^T (p_gt - t) / s, R_est = R^T R_gt.
+Trajectory EstimateFrom(const Trajectory& gt, const Similarity3& gt_from_est) {
+  Trajectory est = gt;
+  const Eigen::Quaterniond q(gt_from_est.rotation);
+  for (Pose& p : est.world_from_cam) {
+    p.t = gt_from_est.rotation.transpose() * (p.t - gt_from_est.translation) / gt_from_est.scale;
+    p.q = (q.conjugate() * p.q).normalized();
+  }
+  return est;
+}
+
+std::vector<Eigen::Vector3d> Positions(const Trajectory& t) {
+  std::vector<Eigen::Vector3d> out;
+  for (const Pose& p : t.world_from_cam) out.push_back(p.t);
+  return out;
+}
+
+Trajectory Straight(int n, const std::vector<Eigen::Vector3d>& offsets = {}) {
+  Trajectory t;
+  for (int i = 0; i < n; ++i) {
+    t.stamps_s.push_back(i);
+    t.world_from_cam.emplace_back(Eigen::Quaterniond::Identity(),
+                                  Eigen::Vector3d(i, 0, 0) + (offsets.empty() ? Eigen::Vector3d::Zero() : offsets[i]));
+  }
+  return t;
+}
+
+TEST(Umeyama, RecoversKnownSim3OnExactData) {
+  const Trajectory gt = MakeGroundTruth(40);
+  const Similarity3 truth = KnownSim3();
+  const Trajectory est = EstimateFrom(gt, truth);
+  const AlignmentResult r = AlignPositions(Positions(est), Positions(gt), Alignment::kSim3);
+  // Exact data: only rounding in a 3x3 SVD of sums over 40 points, ~1e-14 relative; 1e-9 is the brief's bound.
+  EXPECT_NEAR(r.gt_world_from_est_world.scale, 2.5, 1e-9);
+  EXPECT_LT((r.gt_world_from_est_world.rotation - truth.rotation).norm(), 1e-9);
+  EXPECT_LT((r.gt_world_from_est_world.translation - truth.translation).norm(), 1e-9);
+  EXPECT_FALSE(r.rotation_ambiguous);
+}
+
+TEST(Umeyama, RecoversKnownSE3OnExactData) {
+  const Trajectory gt = MakeGroundTruth(40);
+  Similarity3 truth = KnownSim3();
+  truth.scale = 1.0;
+  const Trajectory est = EstimateFrom(gt, truth);
+  const AlignmentResult r = AlignPositions(Positions(est), Positions(gt), Alignment::kSE3);
+  EXPECT_EQ(r.gt_world_from_est_world.scale, 1.0);  // SE(3): no scale at all
+  // As above: rounding only.
+  EXPECT_LT((r.gt_world_from_est_world.rotation - truth.rotation).norm(), 1e-9);
+  EXPECT_LT((r.gt_world_from_est_world.translation - truth.translation).norm(), 1e-9);
+}
+
+TEST(Umeyama, NoneIsIdentityAndBadInputThrows) {
+  const Trajectory gt = MakeGroundTruth(5);
+  const AlignmentResult r = AlignPositions(Positions(gt), Positions(gt), Alignment::kNone);
+  EXPECT_EQ(r.gt_world_from_est_world.scale, 1.0);
+  EXPECT_EQ(r.gt_world_from_est_world.rotation, Eigen::Matrix3d::Identity());
+  const std::vector<Eigen::Vector3d> two = {{0, 0, 0}, {1, 0, 0}};
+  ExpectThrowsWith([&] { AlignPositions(two, two, Alignment::kSim3); }, "at least 3");
+  const std::vector<Eigen::Vector3d> same(5, Eigen::Vector3d(1, 2, 3));
+  ExpectThrowsWith([&] { AlignPositions(same, Positions(gt), Alignment::kSim3); }, "all the same");
+  ExpectThrowsWith([&] { AlignPositions(Positions(gt), same, Alignment::kSE3); }, "all the same");
+  auto bad = Positions(gt);
+  bad[2].y() = INFINITY;
+  ExpectThrowsWith([&] { AlignPositions(bad, Positions(gt), Alignment::kSim3); }, "not finite");
+}
+
+TEST(Umeyama, FlagsCollinearPositions) {
+  const Trajectory line = Straight(10);
+  const AlignmentResult r = AlignPositions(Positions(line), Positions(line), Alignment::kSE3);
+  EXPECT_TRUE(r.rotation_ambiguous);
+}
+
+TEST(Eval, AteMatchesHandComputedValueWithoutAlignment) {
+  // Four poses; the estimate is off by 0.1, 0.2, 0.3 and 0 m along different axes.
+  const Trajectory gt = Straight(4);
+  const Trajectory est = Straight(4, {{0.1, 0, 0}, {0, 0.2, 0}, {0, 0, -0.3}, {0, 0, 0}});
+  EvalOptions opt;
+  opt.alignment = Alignment::kNone;
+  const TrajectoryErrors e = EvaluateTrajectory(gt, est, opt);
+  ASSERT_EQ(e.matched(), 4u);
+  // Hand values: rmse = sqrt((0.01 + 0.04 + 0.09) / 4), mean = 0.6 / 4, median = (0.1 + 0.2) / 2, max 0.3.
+  // 1e-15: a handful of roundings of numbers of order 0.1.
+  EXPECT_NEAR(e.ate_m.rmse, std::sqrt(0.035), 1e-15);
+  EXPECT_NEAR(e.ate_m.mean, 0.15, 1e-15);
+  EXPECT_NEAR(e.ate_m.median, 0.15, 1e-15);
+  EXPECT_NEAR(e.ate_m.max, 0.3, 1e-15);
+  EXPECT_NEAR(e.frames[2].trans_err_m, 0.3, 1e-15);
+  EXPECT_EQ(e.rot_deg.max, 0.0);  // identical orientations: exactly zero
+}
+
+TEST(Eval, RotationErrorPerFrame) {
+  const Trajectory gt = Straight(4);
+  Trajectory est = gt;
+  est.world_from_cam[2].q = QuaternionFromRotationVector(Eigen::Vector3d(0, 0, DegToRad(5.0)));
+  est.world_from_cam[3].q = QuaternionFromRotationVector(Eigen::Vector3d(DegToRad(-12.0), 0, 0));
+  EvalOptions opt;
+  opt.alignment = Alignment::kNone;
+  const TrajectoryErrors e = EvaluateTrajectory(gt, est, opt);
+  // The angle survives quaternion round-offs to ~1e-14 deg; 1e-12 deg is far below anything meaningful.
+  EXPECT_NEAR(e.frames[0].rot_err_deg, 0.0, 1e-12);
+  EXPECT_NEAR(e.frames[2].rot_err_deg, 5.0, 1e-12);
+  EXPECT_NEAR(e.frames[3].rot_err_deg, 12.0, 1e-12);
+  EXPECT_NEAR(e.rot_deg.mean, 17.0 / 4.0, 1e-12);
+  EXPECT_NEAR(e.rot_deg.max, 12.0, 1e-12);
+  EXPECT_EQ(e.ate_m.max, 0.0);  // positions untouched: exactly zero
+}
+
+TEST(Eval, RpeOnHandMadeCase) {
+  // Steps of 1 m along x; the estimate's third step is 1.5 m, and its last camera turns by 10 deg.
+  const Trajectory gt = Straight(4);
+  Trajectory est = Straight(4, {{0, 0, 0}, {0, 0, 0}, {0.5, 0, 0}, {0.5, 0, 0}});
+  est.world_from_cam[3].q = QuaternionFromRotationVector(Eigen::Vector3d(0, 0, DegToRad(10.0)));
+  EvalOptions opt;
+  opt.alignment = Alignment::kNone;
+  TrajectoryErrors e = EvaluateTrajectory(gt, est, opt);
+  // Relative motions 0->1, 1->2, 2->3: translation errors 0, 0.5, 0; rotation errors 0, 0, 10 deg.
+  // Tolerances: a few roundings of O(1) numbers (1e-14 m, 1e-12 deg after the rad->deg factor).
+  EXPECT_EQ(e.rpe_trans_m.count, 3u);
+  EXPECT_NEAR(e.rpe_trans_m.rmse, std::sqrt(0.25 / 3.0), 1e-14);
+  EXPECT_NEAR(e.rpe_trans_m.mean, 0.5 / 3.0, 1e-14);
+  EXPECT_NEAR(e.rpe_rot_deg.mean, 10.0 / 3.0, 1e-12);
+  // Delta 2: motions 0->2 (error 0.5 m) and 1->3 (0.5 m, and 10 deg).
+  opt.rpe_delta = 2;
+  e = EvaluateTrajectory(gt, est, opt);
+  EXPECT_EQ(e.rpe_trans_m.count, 2u);
+  EXPECT_NEAR(e.rpe_trans_m.mean, 0.5, 1e-14);
+  EXPECT_NEAR(e.rpe_rot_deg.mean, 5.0, 1e-12);
+  // Delta beyond the trajectory: no pairs, NaN statistics.
+  opt.rpe_delta = 4;
+  e = EvaluateTrajectory(gt, est, opt);
+  EXPECT_EQ(e.rpe_trans_m.count, 0u);
+  EXPECT_TRUE(std::isnan(e.rpe_trans_m.rmse));
+}
+
+TEST(Eval, Sim3AlignedEstimateHasNoError) {
+  const Trajectory gt = MakeGroundTruth(100);
+  const Trajectory est = EstimateFrom(gt, KnownSim3());
+  const TrajectoryErrors e = EvaluateTrajectory(gt, est);  // defaults: Sim(3), delta 1
+  EXPECT_EQ(e.matched(), 100u);
+  // Exact data: only rounding, positions of order 10 m: 1e-9 m is a generous bound.
+  EXPECT_LT(e.ate_m.max, 1e-9);
+  EXPECT_NEAR(e.alignment_result.gt_world_from_est_world.scale, 2.5, 1e-9);
+  EXPECT_LT(e.rot_deg.max, 1e-6);  // rounding in R and quaternions, ~1e-13 rad, shown in degrees
+  EXPECT_LT(e.rpe_trans_m.max, 1e-9);
+  EXPECT_LT(e.rpe_rot_deg.max, 1e-6);
+
+  // Without alignment the same estimate is far off.
+  EvalOptions none;
+  none.alignment = Alignment::kNone;
+  EXPECT_GT(EvaluateTrajectory(gt, est, none).ate_m.rmse, 1.0);
+  // SE(3) cannot undo the scale of 2.5.
+  EvalOptions se3;
+  se3.alignment = Alignment::kSE3;
+  EXPECT_GT(EvaluateTrajectory(gt, est, se3).ate_m.rmse, 0.1);
+}
+
+TEST(Association, NearestWithinToleranceWithTimeOffset) {
+  const Trajectory gt = MakeGroundTruth(50);
+  Trajectory est = gt;
+  for (double& s : est.stamps_s) s += 0.007;  // a clock offset below the 0.02 s default
+  std::vector<MatchedPair> pairs = Associate(gt, est);
+  ASSERT_EQ(pairs.size(), 50u);
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    EXPECT_EQ(pairs[i].gt_index, i);
+    EXPECT_EQ(pairs[i].est_index, i);
+    EXPECT_NEAR(pairs[i].dt_s, 0.007, 1e-12);  // difference of two stamps of ~100 s: ~1e-14 rounding
+  }
+  AssociationOptions tight;
+  tight.max_dt_s = 0.005;
+  EXPECT_TRUE(Associate(gt, est, tight).empty());
+  EvalOptions opt;
+  opt.association = tight;
+  ExpectThrowsWith([&] { EvaluateTrajectory(gt, est, opt); }, "no estimated pose has a ground-truth pose");
+}
+
+TEST(Association, OneToOneGreedyBySmallestDt) {
+  Trajectory gt, est;
+  for (double s : {0.0, 1.0, 2.0}) {
+    gt.stamps_s.push_back(s);
+    gt.world_from_cam.emplace_back();
+  }
+  for (double s : {0.99, 1.005, 2.03, 1.995}) {  // 0.99 and 1.005 both near 1.0; 2.03 is too far
+    est.stamps_s.push_back(s);
+    est.world_from_cam.emplace_back();
+  }
+  const auto pairs = Associate(gt, est);
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0].est_index, 1u);  // ordered by estimate stamp: 1.005 before 1.995
+  EXPECT_EQ(pairs[0].gt_index, 1u);
+  EXPECT_EQ(pairs[1].est_index, 3u);
+  EXPECT_EQ(pairs[1].gt_index, 2u);
+}
+
+TEST(Association, ByIndexWhenStampsAreMissing) {
+  Trajectory gt = MakeGroundTruth(10);
+  Trajectory est = MakeGroundTruth(8);
+  est.has_stamps = false;
+  for (size_t i = 0; i < est.size(); ++i) est.stamps_s[i] = static_cast<double>(i);
+  const auto pairs = Associate(gt, est);
+  ASSERT_EQ(pairs.size(), 8u);
+  for (size_t i = 0; i < pairs.size(); ++i) EXPECT_EQ(pairs[i].gt_index, pairs[i].est_index);
+  EXPECT_LT(EvaluateTrajectory(gt, est).ate_m.max, 1e-12);  // identical poses: rounding in the alignment only
+}
+
+TEST(Eval, FewerThanThreeMatchesThrows) {
+  const Trajectory gt = MakeGroundTruth(10);
+  Trajectory est = MakeGroundTruth(10);
+  for (size_t i = 2; i < est.size(); ++i) est.stamps_s[i] += 50.0;  // only two stamps overlap
+  ExpectThrowsWith([&] { EvaluateTrajectory(gt, est); }, "needs at least 3");
+}
+
+TEST(Eval, BadInputThrows) {
+  const Trajectory gt = MakeGroundTruth(10);
+  ExpectThrowsWith([&] { EvaluateTrajectory(gt, Trajectory{}); }, "no poses");
+  Trajectory est = gt;
+  est.world_from_cam[4].t.x() = std::nan("");
+  ExpectThrowsWith([&] { EvaluateTrajectory(gt, est); }, "estimated pose 4");
+  est = gt;
+  for (Pose& p : est.world_from_cam) p.t = Eigen::Vector3d(1, 1, 1);
+  ExpectThrowsWith([&] { EvaluateTrajectory(gt, est); }, "all the same");
+  EvalOptions opt;
+  opt.rpe_delta = 0;
+  EXPECT_THROW(EvaluateTrajectory(gt, gt, opt), std::invalid_argument);
+  opt = {};
+  opt.association.max_dt_s = -1;
+  EXPECT_THROW(EvaluateTrajectory(gt, gt, opt), std::invalid_argument);
+  EXPECT_THROW(ParseAlignment("foo"), std::invalid_argument);
+  EXPECT_EQ(ParseAlignment("SIM3"), Alignment::kSim3);
+  EXPECT_EQ(ParseAlignment(ToString(Alignment::kSE3)), Alignment::kSE3);
+}
+
+TEST(Eval, StatsOfEvenCountAndEmpty) {
+  const ErrorStats s = ComputeStats({4.0, 1.0, 3.0, 2.0});
+  EXPECT_EQ(s.median, 2.5);  // exact in binary
+  EXPECT_EQ(s.max, 4.0);
+  EXPECT_EQ(s.mean, 2.5);
+  EXPECT_TRUE(std::isnan(ComputeStats({}).rmse));
+}
+
+TEST(Eval, CsvAndSummary) {
+  mcslam::testing::TempDir dir;
+  const Trajectory gt = MakeGroundTruth(20);
+  Trajectory est = gt;
+  est.world_from_cam[3].t.x() += 1e-9;  // a tiny error must stay visible in the summary
+  EvalOptions opt;
+  opt.alignment = Alignment::kNone;
+  const TrajectoryErrors e = EvaluateTrajectory(gt, est, opt);
+  WriteFrameErrorsCsv(dir / "err.csv", e);
+  const std::string csv = mcslam::testing::ReadText(dir / "err.csv");
+  EXPECT_EQ(csv.rfind("stamp,gt_x,gt_y,gt_z,est_x,est_y,est_z,trans_err_m,rot_err_deg\n", 0), 0u);
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 21);
+  const std::string line = FormatSummary(e);
+  EXPECT_EQ(line.find('\n'), std::string::npos);
+  EXPECT_EQ(line.rfind("matched=20 align=none scale=1 ", 0), 0u) << line;
+  EXPECT_NE(line.find("ate_max=1e-09"), std::string::npos) << line;
+  EXPECT_NE(line.find(" rot_mean_deg="), std::string::npos) << line;
+  EXPECT_THROW(WriteFrameErrorsCsv(dir / "no/such/dir.csv", e), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace mcslam::eval
