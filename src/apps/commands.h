@@ -8,5 +8,7 @@ namespace mcslam::apps {
 
 void RegisterSynth(CLI::App& app);
 void RegisterEval(CLI::App& app);
+void RegisterRun(CLI::App& app);
+void RegisterBench(CLI::App& app);
 
 }  // namespace mcslam::apps

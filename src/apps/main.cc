@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
   app.parse_complete_callback([&] { spdlog::set_level(verbose ? spdlog::level::debug : spdlog::level::info); });
   mcslam::apps::RegisterSynth(app);
   mcslam::apps::RegisterEval(app);
+  mcslam::apps::RegisterRun(app);
+  mcslam::apps::RegisterBench(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,29 @@
+# Two entry points for a newcomer on a fresh Debian machine:
+#   make demo   installs what is missing, builds, runs the main job on the built-in synthetic scenario
+#   make test   installs what is missing, builds, runs every test through ctest
+BUILD ?= build
+JOBS ?= $(shell nproc)
+DEMO_OUT ?= out/demo
+CMAKE_FLAGS ?=
+
+.PHONY: all deps configure build test demo bench clean
+
+all: build
+
+deps:
+	bash scripts/install-deps.sh
+
+configure: deps
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS)
+
+build: configure
+	cmake --build $(BUILD) -j $(JOBS)
+
+test: build
+	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS) --timeout 900
+
+demo: build
+	bash scripts/demo.sh $(BUILD)/mcslam $(DEMO_OUT)
+
+clean:
+	rm -rf $(BUILD) out

@@ -1,0 +1,121 @@
+// mcslam bench: throughput of the Monte Carlo kernels, and the accuracy of the pose estimator against the
+// number of hypotheses on the paper's noisy scenario.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "apps/commands.h"
+#include "apps/known_map_job.h"
+#include "apps/options.h"
+#include "compute/pose_fixture.h"
+#include "eval/trajectory_eval.h"
+
+namespace mcslam::apps {
+
+namespace {
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+struct PoseBenchArgs {
+  int hypotheses = 1 << 18;
+  std::vector<int> points{200};
+  int repeats = 15;
+  std::string backend = "cpu";
+};
+
+void BenchPose(const PoseBenchArgs& a) {
+  for (int np : a.points) {
+    auto kernel = MakePoseKernelFor(a.backend);
+    const compute::PoseFixture fx(np);
+    const compute::NormalTable table(a.hypotheses, 1);
+    kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);  // warm-up
+    std::vector<double> ms;
+    for (int r = 0; r < a.repeats; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
+      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
+    }
+    const double med = Median(ms);
+    fmt::print("bench pose backend={} threads={} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "
+               "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
+               a.backend, compute::CpuThreadCount(), a.hypotheses, np, a.repeats, med,
+               *std::min_element(ms.begin(), ms.end()), double(a.hypotheses) * np / (med * 1e-3));
+  }
+}
+
+struct SweepArgs {
+  int min_log2 = 10, max_log2 = 20;
+  sim::PaperScenarioOptions scenario;
+  PoseFlags pose;
+  std::string backend = "cpu";
+};
+
+void BenchSweep(SweepArgs a) {
+  if (a.min_log2 > a.max_log2) throw std::invalid_argument("--min-log2 must not exceed --max-log2");
+  a.scenario.Check();
+  const KnownMapInput input = KnownMapInputFromSequence(sim::MakePaperScenario(a.scenario));
+  fmt::print("# noisy paper scenario: {} frames, noise {} px, outliers {}, seed {}, random={}, rounds={}\n",
+             a.scenario.frames, a.scenario.noise_px, a.scenario.outlier_fraction, a.scenario.seed, a.pose.random,
+             a.pose.tracker.rounds);
+  fmt::print("{:>10} {:>8} {:>14} {:>14} {:>12} {:>8}\n", "hypotheses", "log2", "trans_mean_m", "rot_mean_deg",
+             "frame_ms", "lost");
+  for (int l = a.min_log2; l <= a.max_log2; ++l) {
+    PoseFlags flags = a.pose;
+    flags.tracker.hypotheses = 1 << l;
+    slam::KnownMapOptions options;
+    options.tracker = flags.Resolve();
+    const auto results = RunKnownMap(input, options, MakePoseKernelFor(a.backend));
+    std::vector<double> ms;
+    int lost = 0;
+    for (const auto& r : results)
+      if (!r.given) ms.push_back(r.time_ms), lost += !r.estimate.tracked;
+    eval::EvalOptions eo;
+    eo.alignment = eval::Alignment::kNone;
+    const auto err = eval::EvaluateTrajectory(input.groundtruth, ResultsToTrajectory(results, false), eo);
+    fmt::print("{:>10} {:>8} {:>14.6f} {:>14.5f} {:>12.3f} {:>8}\n", 1 << l, l, err.ate_m.mean, err.rot_deg.mean,
+               Median(ms), lost);
+  }
+}
+
+}  // namespace
+
+void RegisterBench(CLI::App& app) {
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks of the Monte Carlo kernels (figures are medians)");
+  bench->require_subcommand(1);
+
+  auto pa = std::make_shared<PoseBenchArgs>();
+  CLI::App* pose = bench->add_subcommand("pose", "Pose kernel: time per frame and hypothesis x point evaluations/s");
+  pose->add_option("--hypotheses", pa->hypotheses, "Hypotheses per frame")->check(CLI::Range(1, 1 << 26))->capture_default_str();
+  pose->add_option("--points", pa->points, "Map points scored (several values: one line each)")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  pose->add_option("--repeats", pa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
+  AddBackendFlag(pose, &pa->backend);
+  pose->callback([pa] { BenchPose(*pa); });
+
+  auto sa = std::make_shared<SweepArgs>();
+  sa->scenario.noise_px = 1.0;
+  sa->scenario.outlier_fraction = 0.1;
+  sa->scenario.frames = 150;
+  CLI::App* sweep = bench->add_subcommand(
+      "sweep", "Mean translation and rotation error of known-map tracking on the noisy paper scenario against 2^k hypotheses");
+  sweep->add_option("--min-log2", sa->min_log2, "Smallest log2(hypotheses)")->check(CLI::Range(1, 24))->capture_default_str();
+  sweep->add_option("--max-log2", sa->max_log2, "Largest log2(hypotheses)")->check(CLI::Range(1, 24))->capture_default_str();
+  sweep->add_option("--frames", sa->scenario.frames, "Frames of the scenario")->check(CLI::PositiveNumber)->capture_default_str();
+  sweep->add_option("--noise", sa->scenario.noise_px, "Pixel noise sigma")->check(CLI::NonNegativeNumber)->capture_default_str();
+  sweep->add_option("--outliers", sa->scenario.outlier_fraction, "Outlier fraction")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  sweep->add_option("--scenario-seed", sa->scenario.seed, "Seed of the scenario")->capture_default_str();
+  sa->pose.Add(sweep);
+  AddBackendFlag(sweep, &sa->backend);
+  sweep->callback([sa] { BenchSweep(*sa); });
+}
+
+}  // namespace mcslam::apps

@@ -1,0 +1,116 @@
+#include "apps/known_map_job.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "io/camera_io.h"
+#include "io/observations_io.h"
+#include "io/ply.h"
+
+namespace mcslam::apps {
+
+namespace fs = std::filesystem;
+
+std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames) {
+  std::vector<slam::FrameObservations> out;
+  out.reserve(frames.size());
+  for (const io::ObservationFrame& f : frames) {
+    slam::FrameObservations s;
+    s.index = f.index;
+    s.stamp_s = f.stamp_s;
+    s.features.reserve(f.observations.size());
+    for (const io::Observation& o : f.observations) s.features.push_back({o.feature_id, {o.u_px, o.v_px}});
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+KnownMapInput LoadKnownMapInput(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw std::runtime_error(fmt::format("input folder '{}' does not exist", dir));
+  auto need = [&](const char* name) {
+    const fs::path p = fs::path(dir) / name;
+    if (!fs::exists(p)) throw std::runtime_error(fmt::format("'{}' is missing (known-map mode needs it)", p.string()));
+    return p.string();
+  };
+  KnownMapInput in;
+  in.camera = io::ReadCameraYaml(need("camera.yaml"));
+  in.frames = ToSlamFrames(io::ReadObservations(need("observations.txt")));
+  const io::PointCloud cloud = io::ReadPly(need("map_gt.ply"));
+  if (cloud.ids.size() != cloud.points.size())
+    throw std::runtime_error(fmt::format("'{}/map_gt.ply' has no per-point 'id' property", dir));
+  for (size_t i = 0; i < cloud.points.size(); ++i) in.map[cloud.ids[i]] = cloud.points[i];
+  const fs::path gt = fs::path(dir) / "groundtruth.txt";
+  if (fs::exists(gt)) in.groundtruth = io::ReadTum(gt.string());
+  if (in.frames.empty()) throw std::runtime_error(fmt::format("'{}/observations.txt' holds no frame", dir));
+  return in;
+}
+
+KnownMapInput KnownMapInputFromSequence(const sim::SyntheticSequence& seq) {
+  KnownMapInput in;
+  in.camera = seq.camera;
+  in.frames = ToSlamFrames(sim::ToObservationFrames(seq));
+  for (size_t i = 0; i < seq.points_in_world.size(); ++i) in.map[static_cast<int64_t>(i)] = seq.points_in_world[i];
+  in.groundtruth = sim::ToTrajectory(seq);
+  return in;
+}
+
+std::vector<slam::FrameResult> RunKnownMap(const KnownMapInput& input, const slam::KnownMapOptions& options,
+                                           std::unique_ptr<compute::PoseKernel> kernel,
+                                           const std::function<void(const slam::FrameResult&)>& on_frame,
+                                           const std::function<bool()>& stop) {
+  if (input.frames.empty()) throw std::runtime_error("no frames to track");
+  // The first pose is given, as in the paper's precision test: the ground-truth pose of the first frame.
+  const double t0 = input.frames.front().stamp_s;
+  int best = -1;
+  for (size_t i = 0; i < input.groundtruth.size(); ++i)
+    if (std::abs(input.groundtruth.stamps_s[i] - t0) <= 1e-3 &&
+        (best < 0 || std::abs(input.groundtruth.stamps_s[i] - t0) < std::abs(input.groundtruth.stamps_s[best] - t0)))
+      best = static_cast<int>(i);
+  if (best < 0)
+    throw std::runtime_error(fmt::format(
+        "known-map tracking needs the pose of the first frame (t = {:.6f} s) in the ground truth, and none is within 1 ms",
+        t0));
+
+  slam::KnownMapTracker tracker(input.camera, input.map, options, std::move(kernel));
+  std::vector<slam::FrameResult> results;
+  results.reserve(input.frames.size());
+  results.push_back(tracker.Start(input.frames.front(), input.groundtruth.world_from_cam[best].Inverse()));
+  if (on_frame) on_frame(results.back());
+  for (size_t i = 1; i < input.frames.size(); ++i) {
+    if (stop && stop()) break;
+    results.push_back(tracker.Track(input.frames[i]));
+    if (on_frame) on_frame(results.back());
+  }
+  return results;
+}
+
+io::Trajectory ResultsToTrajectory(const std::vector<slam::FrameResult>& results, bool smoothed) {
+  io::Trajectory t;
+  for (const slam::FrameResult& r : results) {
+    if (!r.estimate.tracked) continue;
+    t.stamps_s.push_back(r.stamp_s);
+    t.world_from_cam.push_back((smoothed ? r.smoothed_cam_from_world : r.estimate.cam_from_world).Inverse());
+  }
+  return t;
+}
+
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameResult>& results) {
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
+  f << "index,stamp,tracked,given,keyframe,observed,scored,inliers,score,mean_residual_px,sigma_tx,sigma_ty,sigma_tz,"
+       "pose_ms,lost_reason\n";
+  for (const slam::FrameResult& r : results) {
+    const slam::PoseEstimate& e = r.estimate;
+    f << fmt::format("{},{:.9f},{},{},{},{},{},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.4f},{}\n", r.index, r.stamp_s,
+                     int(e.tracked), int(r.given), int(e.keyframe), r.observed_map_points, e.scored, e.inliers,
+                     e.score, e.mean_inlier_residual_px, e.sigma_t.x(), e.sigma_t.y(), e.sigma_t.z(), r.time_ms,
+                     e.lost_reason);
+  }
+  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
+}
+
+}  // namespace mcslam::apps

@@ -1,0 +1,43 @@
+#pragma once
+// The known-map pose tracking job (paper §8.1 precision test), shared by `mcslam run --known-map` and the
+// hypothesis sweep of `mcslam bench`.
+#include <functional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "core/camera.h"
+#include "io/trajectory_io.h"
+#include "sim/paper_scenario.h"
+#include "slam/known_map_tracking.h"
+
+namespace mcslam::apps {
+
+struct KnownMapInput {
+  PinholeCamera camera;
+  std::vector<slam::FrameObservations> frames;
+  std::unordered_map<int64_t, Eigen::Vector3d> map;
+  io::Trajectory groundtruth;  // world_from_cam; empty when the folder has none
+};
+
+// Reads DIR/camera.yaml, DIR/observations.txt, DIR/map_gt.ply and (when present) DIR/groundtruth.txt.
+// Throws naming the missing or bad file.
+KnownMapInput LoadKnownMapInput(const std::string& dir);
+KnownMapInput KnownMapInputFromSequence(const sim::SyntheticSequence& sequence);
+std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames);
+
+// Tracks every frame; the first frame's pose comes from the ground truth (nearest stamp within 1 ms).
+// `on_frame` (optional) sees each result as it is made. Stops early, keeping what it has, when
+// `stop` (optional) returns true.
+std::vector<slam::FrameResult> RunKnownMap(const KnownMapInput& input, const slam::KnownMapOptions& options,
+                                           std::unique_ptr<compute::PoseKernel> kernel,
+                                           const std::function<void(const slam::FrameResult&)>& on_frame = {},
+                                           const std::function<bool()>& stop = {});
+
+// The tracked frames as a trajectory (world_from_cam); lost frames are left out, never invented.
+io::Trajectory ResultsToTrajectory(const std::vector<slam::FrameResult>& results, bool smoothed);
+// Per-frame CSV: index,stamp,tracked,given,keyframe,observed,scored,inliers,score,mean_residual_px,
+// sigma_tx,sigma_ty,sigma_tz,pose_ms,lost_reason.
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameResult>& results);
+
+}  // namespace mcslam::apps

@@ -1,0 +1,30 @@
+#pragma once
+// Command-line flags shared by several subcommands.
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "compute/pose_kernel.h"
+#include "slam/pose_tracker.h"
+
+namespace mcslam::apps {
+
+// Flags of the Monte Carlo pose estimator (--hypotheses, --seed, --random, --rounds, ...).
+struct PoseFlags {
+  slam::PoseTrackerOptions tracker;
+  std::string random = "table";
+  void Add(CLI::App* cmd);
+  // Applies the string flags; throws std::invalid_argument naming the flag.
+  slam::PoseTrackerOptions Resolve() const;
+};
+
+// --backend cpu|cuda|auto. cuda without a CUDA build or a device is an error, never a silent fallback.
+std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backend);
+void AddBackendFlag(CLI::App* cmd, std::string* backend);
+
+// Ctrl-C: the first SIGINT asks the running job to stop and write what it has; a second one kills.
+void InstallInterruptHandler();
+bool Interrupted();
+
+}  // namespace mcslam::apps

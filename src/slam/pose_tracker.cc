@@ -1,0 +1,165 @@
+#include "slam/pose_tracker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+
+namespace mcslam::slam {
+
+RandomMode ParseRandomMode(const std::string& name) {
+  if (name == "table") return RandomMode::kTable;
+  if (name == "fresh") return RandomMode::kFresh;
+  throw std::invalid_argument(fmt::format("random mode must be 'table' or 'fresh', got '{}'", name));
+}
+
+void PoseTrackerOptions::Check() const {
+  auto fail = [](const std::string& what) { throw std::invalid_argument("pose tracker: " + what); };
+  if (hypotheses < 1) fail(fmt::format("hypotheses must be >= 1, got {}", hypotheses));
+  if (!(sigma_rot_deg >= 0)) fail(fmt::format("sigma_rot_deg must be >= 0, got {}", sigma_rot_deg));
+  if (!(sigma_trans_floor_m > 0)) fail(fmt::format("sigma_trans_floor_m must be > 0, got {}", sigma_trans_floor_m));
+  if (!(sigma_trans_scale >= 0)) fail(fmt::format("sigma_trans_scale must be >= 0, got {}", sigma_trans_scale));
+  if (!(inlier_threshold_px > 0)) fail(fmt::format("inlier_threshold_px must be > 0, got {}", inlier_threshold_px));
+  if (!(max_distance_px > 0)) fail(fmt::format("max_distance_px must be > 0, got {}", max_distance_px));
+  if (min_points < 3) fail(fmt::format("min_points must be >= 3, got {}", min_points));
+  if (min_inliers < 3) fail(fmt::format("min_inliers must be >= 3, got {}", min_inliers));
+  if (!(keyframe_min_inlier_ratio >= 0 && keyframe_min_inlier_ratio <= 1))
+    fail(fmt::format("keyframe_min_inlier_ratio must be in [0, 1], got {}", keyframe_min_inlier_ratio));
+  if (rounds < 1 || rounds > 16) fail(fmt::format("rounds must be in [1, 16], got {}", rounds));
+  if (rounds > hypotheses) fail(fmt::format("rounds ({}) must not exceed hypotheses ({})", rounds, hypotheses));
+  if (!(round_shrink > 0 && round_shrink <= 1)) fail(fmt::format("round_shrink must be in (0, 1], got {}", round_shrink));
+}
+
+PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& options,
+                         std::unique_ptr<compute::PoseKernel> kernel)
+    : camera_(camera), options_(options), kernel_(std::move(kernel)) {
+  camera_.Check();
+  options_.Check();
+  if (!kernel_) throw std::invalid_argument("pose tracker: no compute kernel");
+  table_ = compute::NormalTable(options_.hypotheses, options_.seed, /*stream=*/1);
+}
+
+int PoseTracker::ClassifyInliers(const Pose& cam_from_world, const std::vector<PointObservation>& obs,
+                                 std::vector<double>* residuals, std::vector<uint8_t>* inliers) const {
+  residuals->assign(obs.size(), 0.0);
+  inliers->assign(obs.size(), 0);
+  // Residuals in the ideal pinhole (the observations are undistorted): the same distance the kernel scores.
+  const PinholeCamera ideal(camera_.fx, camera_.fy, camera_.cx, camera_.cy, camera_.width, camera_.height);
+  int count = 0;
+  for (size_t i = 0; i < obs.size(); ++i) {
+    Eigen::Vector2d uv;
+    double r = std::numeric_limits<double>::infinity();
+    if (ideal.ProjectWorld(cam_from_world, obs[i].point_in_world, &uv)) r = (uv - obs[i].uv_undistorted_px).norm();
+    (*residuals)[i] = r;
+    (*inliers)[i] = r < options_.inlier_threshold_px;
+    count += (*inliers)[i];
+  }
+  return count;
+}
+
+Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::vector<PointObservation>& obs) const {
+  // Eqs. 3-5: the translation change that moves the projections of the map the way the features moved,
+  // least squares over all scoring points (stacked Jacobians, not only the centroid), with a few
+  // iteratively reweighted (Huber) passes so that wrong matches do not drag it.
+  const PinholeCamera ideal(camera_.fx, camera_.fy, camera_.cx, camera_.cy, camera_.width, camera_.height);
+  Eigen::Vector3d dt = Eigen::Vector3d::Zero();
+  const double huber = 3.0 * options_.inlier_threshold_px;
+  for (int iter = 0; iter < 3; ++iter) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    int used = 0;
+    for (const PointObservation& o : obs) {
+      if (!o.was_inlier) continue;
+      Eigen::Vector2d uv;
+      Eigen::Matrix<double, 2, 3> Jt;
+      if (!ideal.ProjectWorld(prev, o.point_in_world, &uv, nullptr, &Jt)) continue;
+      const Eigen::Vector2d r = o.uv_undistorted_px - uv;
+      const double e = (r - Jt * dt).norm();
+      const double w = e <= huber ? 1.0 : huber / e;
+      A += w * Jt.transpose() * Jt;
+      b += w * Jt.transpose() * r;
+      ++used;
+    }
+    if (used < 2) return Eigen::Vector3d::Zero();
+    // A tiny ridge keeps the depth direction defined when all points sit at one depth.
+    A += 1e-9 * A.trace() * Eigen::Matrix3d::Identity();
+    dt = A.ldlt().solve(b);
+    if (!dt.allFinite()) return Eigen::Vector3d::Zero();
+  }
+  return dt;
+}
+
+PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,
+                                std::vector<double>* residuals, std::vector<uint8_t>* inliers) {
+  PoseEstimate est;
+  est.cam_from_world = prev;
+
+  sx_.clear(), sy_.clear(), sz_.clear(), su_.clear(), sv_.clear();
+  for (const PointObservation& o : obs) {
+    if (!o.was_inlier) continue;
+    sx_.push_back(static_cast<float>(o.point_in_world.x()));
+    sy_.push_back(static_cast<float>(o.point_in_world.y()));
+    sz_.push_back(static_cast<float>(o.point_in_world.z()));
+    su_.push_back(static_cast<float>(o.uv_undistorted_px.x() - camera_.cx));
+    sv_.push_back(static_cast<float>(o.uv_undistorted_px.y() - camera_.cy));
+  }
+  est.scored = static_cast<int>(sx_.size());
+  if (est.scored < options_.min_points) {
+    est.lost_reason = fmt::format("{} scoring points (< {})", est.scored, options_.min_points);
+    residuals->assign(obs.size(), std::numeric_limits<double>::infinity());
+    inliers->assign(obs.size(), 0);
+    return est;
+  }
+
+  const Eigen::Vector3d dt = LinearisedTranslation(prev, obs);
+  est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+  // omega is added to all 4 quaternion components; a change dv of the vector part rotates by ~2|dv|.
+  const float sigma_q = static_cast<float>(DegToRad(options_.sigma_rot_deg) / 2.0);
+
+  if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
+
+  compute::PoseSampling s;
+  const Eigen::Quaterniond q0 = prev.q.normalized();
+  s.q[0] = static_cast<float>(q0.w()), s.q[1] = static_cast<float>(q0.x());
+  s.q[2] = static_cast<float>(q0.y()), s.q[3] = static_cast<float>(q0.z());
+  for (int k = 0; k < 3; ++k) s.t[k] = static_cast<float>(prev.t[k]);
+  compute::PoseScoringParams params;
+  params.fx = static_cast<float>(camera_.fx);
+  params.fy = static_cast<float>(camera_.fy);
+  params.max_distance_px = static_cast<float>(options_.max_distance_px);
+  const compute::PoseScoringPoints pts{sx_.data(), sy_.data(), sz_.data(), su_.data(), sv_.data(), est.scored};
+
+  compute::BestHypothesis best;
+  const int per_round = options_.hypotheses / options_.rounds;
+  for (int round = 0; round < options_.rounds; ++round) {
+    const double f = std::pow(options_.round_shrink, round);
+    for (int k = 0; k < 4; ++k) s.sigma_q[k] = static_cast<float>(sigma_q * f);
+    for (int k = 0; k < 3; ++k) s.sigma_t[k] = static_cast<float>(est.sigma_t[k] * f);
+    const int count = round + 1 == options_.rounds ? options_.hypotheses - per_round * round : per_round;
+    // Row 0 of the table is zero, so the centre (the best so far) is always re-scored: rounds never get worse.
+    best = kernel_->Score(s, pts, params, table_, count);
+    for (int k = 0; k < 4; ++k) s.q[k] = best.q[k];
+    for (int k = 0; k < 3; ++k) s.t[k] = best.t[k];
+  }
+
+  est.cam_from_world = Pose(Eigen::Quaterniond(best.q[0], best.q[1], best.q[2], best.q[3]),
+                            Eigen::Vector3d(best.t[0], best.t[1], best.t[2]));
+  est.score = best.score;
+  est.inliers = ClassifyInliers(est.cam_from_world, obs, residuals, inliers);
+  double sum = 0;
+  for (size_t i = 0; i < obs.size(); ++i)
+    if ((*inliers)[i]) sum += (*residuals)[i];
+  est.mean_inlier_residual_px = est.inliers > 0 ? sum / est.inliers : 0.0;
+  if (est.inliers < options_.min_inliers) {
+    est.lost_reason = fmt::format("{} inliers (< {})", est.inliers, options_.min_inliers);
+    est.cam_from_world = prev;
+    return est;
+  }
+  est.tracked = true;
+  est.keyframe = est.inliers >= options_.keyframe_min_inlier_ratio * est.scored;
+  return est;
+}
+
+}  // namespace mcslam::slam

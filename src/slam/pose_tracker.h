@@ -1,0 +1,91 @@
+#pragma once
+// Monte Carlo pose estimation of one frame (paper §5): hypotheses drawn around the previous pose (Eq. 2),
+// the translation spread set from a linearised translation-only model (Eqs. 3-5), scored by reprojection
+// distance over the map points that were inliers before (Eq. 6, Algorithm 1); the best is the pose.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "compute/pose_kernel.h"
+#include "core/camera.h"
+#include "core/pose.h"
+
+namespace mcslam::slam {
+
+enum class RandomMode {
+  kTable,  // the paper's: one table of normals made from the seed, rescaled every frame
+  kFresh,  // new normals every frame from the counter-based generator (seed, frame index)
+};
+RandomMode ParseRandomMode(const std::string& name);  // "table" | "fresh"; throws naming the value
+
+struct PoseTrackerOptions {
+  int hypotheses = 1 << 18;            // per frame, all rounds together (the paper: 2^18)
+  uint64_t seed = 1;                   // the random table / stream
+  RandomMode random = RandomMode::kTable;
+  double sigma_rot_deg = 1.0;          // std of the rotation per axis (Sigma_rot, fixed), degrees per frame
+  double sigma_trans_floor_m = 0.002;  // Sigma_trans never falls below this (m), so sampling never collapses
+  double sigma_trans_scale = 1.0;      // Sigma_trans = diag(scale * |t_hat - t_prev| + floor)
+  double inlier_threshold_px = 3.0;    // residual under which a point is an inlier at the best pose
+  double max_distance_px = 1e4;        // cap on one point's contribution to the score (1e4: the paper's plain sum)
+  int min_points = 6;                  // fewer scoring points than this: the frame is lost, nothing is scored
+  int min_inliers = 8;                 // fewer inliers at the best pose: the frame is lost
+  double keyframe_min_inlier_ratio = 0.6;  // keyframe when inliers >= ratio * scored points (and >= min_inliers)
+  int rounds = 1;                      // > 1: resample around the best with shrinking spread (beyond the paper)
+  double round_shrink = 0.35;          // spread factor from one round to the next
+  void Check() const;                  // throws std::invalid_argument naming the bad field
+};
+
+// One map point seen in this frame.
+struct PointObservation {
+  Eigen::Vector3d point_in_world;
+  Eigen::Vector2d uv_undistorted_px;  // the tracked feature, undistorted
+  bool was_inlier = true;             // inlier in the previous frames: only these take part in the score
+};
+
+struct PoseEstimate {
+  bool tracked = false;          // false: lost (cam_from_world is then the sampling centre, not an estimate)
+  bool keyframe = false;
+  Pose cam_from_world;
+  int scored = 0;                // points that took part in the score
+  int inliers = 0;               // observations with residual under the threshold at the best pose
+  double score = 0;              // best summed distance (px)
+  double mean_inlier_residual_px = 0;
+  Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();  // the translation spread used (m)
+  std::string lost_reason;       // why, when not tracked
+};
+
+class PoseTracker {
+ public:
+  PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& options,
+              std::unique_ptr<compute::PoseKernel> kernel);
+
+  // Estimates the pose of a frame from the previous pose. `residuals_px` and `inliers` receive one entry
+  // per observation (residual at the estimated pose; inlier flag for the next frame). frame_index seeds
+  // the fresh random mode.
+  PoseEstimate Track(const Pose& prev_cam_from_world, const std::vector<PointObservation>& observations,
+                     uint64_t frame_index, std::vector<double>* residuals_px, std::vector<uint8_t>* inliers);
+
+  // Residuals and inlier flags of the observations at a given pose (used for the first frame).
+  int ClassifyInliers(const Pose& cam_from_world, const std::vector<PointObservation>& observations,
+                      std::vector<double>* residuals_px, std::vector<uint8_t>* inliers) const;
+
+  // The translation the linearised translation-only model (Eqs. 3-5) predicts, from the scoring points.
+  Eigen::Vector3d LinearisedTranslation(const Pose& prev_cam_from_world,
+                                        const std::vector<PointObservation>& observations) const;
+
+  const PoseTrackerOptions& options() const { return options_; }
+  compute::PoseKernel& kernel() { return *kernel_; }
+
+ private:
+  PinholeCamera camera_;
+  PoseTrackerOptions options_;
+  std::unique_ptr<compute::PoseKernel> kernel_;
+  compute::NormalTable table_;
+  // Scoring set, structure of arrays; reused across frames (no allocation per frame once warm).
+  std::vector<float> sx_, sy_, sz_, su_, sv_;
+};
+
+}  // namespace mcslam::slam

@@ -1,0 +1,116 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "io/trajectory_io.h"
+#include "test_util.h"
+#include <filesystem>
+
+namespace mcslam {
+namespace {
+
+using testing::ReadText;
+using testing::RunMcslam;
+using testing::TempDir;
+
+int CountDataLines(const std::string& path) {
+  std::istringstream in(ReadText(path));
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line))
+    if (!line.empty() && line[0] != '#') ++n;
+  return n;
+}
+
+TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 40 --noise 1 --outliers 0.1 --out " + dir / "s").exit_code, 0);
+  const auto r = RunMcslam("run " + dir / "s" + " --known-map --hypotheses 65536 --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=40 lost=0"), std::string::npos) << r.output;
+  const io::Trajectory est = io::ReadTum(dir / "r/trajectory.txt");
+  const io::Trajectory smooth = io::ReadTum(dir / "r/trajectory_smoothed.txt");
+  EXPECT_EQ(est.size(), 40u);
+  EXPECT_EQ(smooth.size(), 40u);
+  EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 41);  // header + 40 frames
+  // mcslam eval on the output: the paper's bounds hold on this short run too (2 cm, 1 degree).
+  const auto e = RunMcslam("eval " + dir / "s/groundtruth.txt " + dir / "r/trajectory.txt --align none");
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  const double ate_mean = std::stod(e.output.substr(e.output.find("ate_mean=") + 9));
+  const double rot_mean = std::stod(e.output.substr(e.output.find("rot_mean_deg=") + 13));
+  EXPECT_LT(ate_mean, 0.02);
+  EXPECT_LT(rot_mean, 1.0);
+}
+
+TEST(CliRun, SameSeedSameTrajectory) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 15 --noise 1 --out " + dir / "s").exit_code, 0);
+  ASSERT_EQ(RunMcslam("run " + dir / "s --known-map --hypotheses 8192 --seed 5 --out " + dir / "a").exit_code, 0);
+  ASSERT_EQ(RunMcslam("run " + dir / "s --known-map --hypotheses 8192 --seed 5 --out " + dir / "b").exit_code, 0);
+  ASSERT_EQ(RunMcslam("run " + dir / "s --known-map --hypotheses 8192 --seed 6 --out " + dir / "c").exit_code, 0);
+  EXPECT_EQ(ReadText(dir / "a/trajectory.txt"), ReadText(dir / "b/trajectory.txt"));
+  EXPECT_NE(ReadText(dir / "a/trajectory.txt"), ReadText(dir / "c/trajectory.txt"));
+}
+
+TEST(CliRun, FrameWithTooFewPointsIsCountedLostAndTrackingGoesOn) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 12 --out " + dir / "s").exit_code, 0);
+  // Keep only 3 observations of frame 5: too few to score, so that frame is lost; the others are tracked.
+  std::istringstream in(ReadText(dir / "s/observations.txt"));
+  std::ostringstream out;
+  std::string line;
+  int kept5 = 0;
+  while (std::getline(in, line)) {
+    if (line.rfind("5 ", 0) == 0 && kept5++ >= 3) continue;
+    out << line << "\n";
+  }
+  testing::WriteText(dir / "s/observations.txt", out.str());
+  const auto r = RunMcslam("run " + dir / "s --known-map --hypotheses 16384 --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=11 lost=1"), std::string::npos) << r.output;
+  EXPECT_EQ(io::ReadTum(dir / "r/trajectory.txt").size(), 11u);  // no invented pose for the lost frame
+}
+
+TEST(CliRun, BadInputIsAClearError) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 5 --out " + dir / "s").exit_code, 0);
+  std::string obs = ReadText(dir / "s/observations.txt");
+  const size_t pos = obs.find("\n1 ");
+  obs.insert(pos + 1, "1 0.033333333 7 nan 12.0\n");
+  testing::WriteText(dir / "s/observations.txt", obs);
+  auto r = RunMcslam("run " + dir / "s --known-map --hypotheses 1024 --out " + dir / "r");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("observations.txt:"), std::string::npos) << r.output;
+
+  r = RunMcslam("run " + dir / "missing --known-map --out " + dir / "r");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("missing"), std::string::npos) << r.output;
+
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 5 --out " + dir / "t").exit_code, 0);
+  std::filesystem::remove(dir / "t/map_gt.ply");
+  r = RunMcslam("run " + dir / "t --known-map --out " + dir / "r");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("map_gt.ply"), std::string::npos) << r.output;
+
+  r = RunMcslam("run " + dir / "t --known-map --hypotheses 0 --out " + dir / "r");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--hypotheses"), std::string::npos) << r.output;
+}
+
+TEST(CliBench, PosePrintsEvaluationsPerSecond) {
+  const auto r = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const size_t at = r.output.find("evals_per_s=");
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_GT(std::stod(r.output.substr(at + 12)), 1e6);  // any working kernel does far more than 1e6/s
+}
+
+TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {
+  const auto r = RunMcslam("bench pose --hypotheses 1024 --backend cuda");
+  if (r.exit_code == 0) GTEST_SKIP() << "a CUDA device is present";
+  EXPECT_NE(r.output.find("--backend cuda"), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace mcslam
