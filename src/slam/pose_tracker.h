@@ -33,7 +33,7 @@ struct PoseTrackerOptions {
   int min_points = 6;                  // fewer scoring points than this: the frame is lost, nothing is scored
   int min_inliers = 8;                 // fewer inliers at the best pose: the frame is lost
   double keyframe_min_inlier_ratio = 0.6;  // keyframe when inliers >= ratio * scored points (and >= min_inliers)
-  int rounds = 1;                      // > 1: resample around the best with shrinking spread (beyond the paper)
+  int rounds = 3;                      // resample around the best with shrinking spread; 1 = the paper's one-shot sampling
   double round_shrink = 0.35;          // spread factor from one round to the next
   void Check() const;                  // throws std::invalid_argument naming the bad field
 };
