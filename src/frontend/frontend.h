@@ -1,0 +1,150 @@
+#pragma once
+// The visual front end (paper §6): per frame, Shi-Tomasi corners are detected only in image cells that
+// hold no tracked feature, every track is followed by pyramidal Lucas-Kanade started from its own
+// constant-velocity Kalman prediction and checked forward-backward, each new track gets one SIFT
+// descriptor (optionally on a TBB task, while the caller estimates the pose), and map points whose track
+// was lost are re-attached (§6.4) when a new corner near their projection matches their descriptor.
+// It knows images and nothing of 3D; its output is feature id -> distorted pixel, per frame.
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <span>
+#include <vector>
+
+namespace mcslam::frontend {
+
+inline constexpr int kDescriptorLength = 128;
+// SIFT as OpenCV computes it: 128 floats, L2 norm about 512 (entries 0..255).
+using Descriptor = std::array<float, kDescriptorLength>;
+float DescriptorDistance(const Descriptor& a, const Descriptor& b);  // L2
+
+struct FrontendOptions {
+  // ---- detection (Shi-Tomasi) -------------------------------------------------------------------------
+  int max_features = 400;       // budget: tracks (re-attached ones included) never outnumber it
+  int cell_size_px = 40;        // grid of square cells; new corners only in cells holding no tracked feature
+  int max_new_per_cell = 2;     // new corners added to one empty cell in one frame
+  double quality_level = 0.01;  // a corner's min eigenvalue must reach this fraction of the frame's largest
+  double min_distance_px = 10;  // between new corners, and from a new corner to any tracked feature
+  int block_size = 3;           // structure tensor window (px)
+  int border_px = 12;           // no corner nearer than this to the image edge
+  // ---- tracking (pyramidal Lucas-Kanade) ----------------------------------------------------------------
+  int pyramid_levels = 2;                // levels including full resolution (the paper: 2)
+  int retry_pyramid_levels = 4;          // a track lost with pyramid_levels is tried once more with this many
+                                         // levels (a young track, a jolt); <= pyramid_levels: no retry
+  int window_px = 21;                    // LK window side (odd)
+  int max_iterations = 30;               // LK iterations per level
+  double epsilon_px = 0.01;              // LK stops when an update is shorter
+  double min_eigen_threshold = 1e-4;     // LK drops a point whose window has less texture than this
+  double max_forward_backward_px = 1.0;  // round trip (track forward, then back) error above this drops a track
+  double max_patch_error = 0.0;          // LK residual (mean |intensity difference|, 0-255) above this
+                                         // drops a track; <= 0: off
+  int track_border_px = 10;              // a track nearer than this to the edge has left the image (half the LK
+                                         // window: nearer, the window reads reflected pixels and the track drifts)
+  // ---- Kalman prediction (state u, v, du, dv per track) -----------------------------------------------
+  bool use_kalman_prediction = true;   // false: LK starts where the feature was (zero motion)
+  double kalman_accel_sigma_px = 2.0;  // change of image velocity per frame (px/frame^2)
+  double kalman_measurement_sigma_px = 0.5;
+  double init_velocity_radius_px = 80;  // a new track starts at the median velocity of tracks this near; 0: at rest
+  // ---- descriptors (SIFT, once per track) -------------------------------------------------------------
+  double descriptor_size_px = 6.0;  // keypoint size given to SIFT (its patch is ~6x this wide); upright
+  bool describe_async = false;      // describe new tracks on a TBB task, joined when next needed
+  // ---- remapping of lost map points (§6.4) ------------------------------------------------------------
+  int remap_window_px = 15;           // half-side of the square search window around the projection
+  int remap_max_candidates = 5;       // strongest new corners described per window
+  double remap_max_distance = 250.0;  // SIFT L2 distance of an accepted match
+  double remap_ratio = 0.8;           // best distance < ratio * second best (Lowe's test)
+
+  // Throws std::invalid_argument naming the bad field and its value.
+  void Check() const;
+};
+
+// A map point whose track was lost, projected with the current pose estimate.
+struct RemapRequest {
+  int64_t feature_id = 0;                           // the id its track had (from this front end)
+  Descriptor descriptor{};                          // from when it was tracked (Frontend::GetDescriptor, LostTrack)
+  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // projection in this frame (distorted pixels)
+};
+
+struct TrackedFeature {
+  int64_t feature_id = 0;
+  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // as seen (distorted pixels)
+  int age_frames = 0;                               // frames since it was born or re-attached (0 in that frame)
+  bool remapped = false;                            // re-attached to a lost map point in this frame
+};
+
+struct LostTrack {
+  int64_t feature_id = 0;
+  Eigen::Vector2d last_uv_px = Eigen::Vector2d::Zero();  // where it was last seen (previous frame)
+  std::optional<Descriptor> descriptor;                  // its SIFT descriptor (always set once described)
+};
+
+struct FrameStats {
+  int tracked = 0;                // tracks carried over from the previous frame that survived
+  int retried = 0;                // tracks lost with pyramid_levels and tried with retry_pyramid_levels
+  int recovered = 0;              // ... of which the retry kept
+  int lost_status = 0;            // LK failed (no convergence, too little texture)
+  int lost_forward_backward = 0;  // round trip error above max_forward_backward_px
+  int lost_patch_error = 0;       // LK residual above max_patch_error
+  int lost_outside = 0;           // left the image
+  int detected = 0;               // new tracks born in this frame
+  int remap_requests = 0;
+  int remapped = 0;
+  int remap_refused_id = 0;    // the id is tracked now, repeated, or was never issued here
+  int remap_outside = 0;       // projection outside the image
+  int remap_no_candidate = 0;  // no new corner in the window
+  int remap_no_match = 0;      // candidates, but none passed the distance and ratio tests
+  int remap_over_budget = 0;   // matched, but the tracks already number max_features
+  // Mean distance of the surviving tracks from where LK started (the Kalman prediction) and from where they
+  // were in the previous frame: how much the prediction saves LK.
+  double mean_prediction_error_px = 0;
+  double mean_displacement_px = 0;
+  // Milliseconds. describe_ms: describing this frame's new tracks when synchronous; with describe_async,
+  // the task's own time for the previous frame's tracks, and describe_wait_ms the time Process waited for it.
+  double convert_ms = 0, pyramid_ms = 0, track_ms = 0, detect_ms = 0, remap_ms = 0, describe_ms = 0,
+         describe_wait_ms = 0, total_ms = 0;
+};
+
+struct FrameResult {
+  int64_t index = 0;
+  double stamp_s = 0;
+  std::vector<TrackedFeature> features;  // every live track in this frame, ids unique
+  std::vector<LostTrack> lost;           // tracks that ended in this frame
+  std::vector<int64_t> remapped_ids;     // requests re-attached in this frame
+  FrameStats stats;
+};
+
+// One thread drives a Frontend (Process, GetDescriptor, Reset, ...); with describe_async the description
+// runs on a TBB task that the Frontend itself joins before anything reads what it writes.
+class Frontend {
+ public:
+  // Throws std::invalid_argument (options.Check()).
+  explicit Frontend(const FrontendOptions& options = {});
+  ~Frontend();
+  Frontend(const Frontend&) = delete;
+  Frontend& operator=(const Frontend&) = delete;
+
+  // One frame: 8-bit gray, BGR or BGRA, or 16-bit gray/BGR (scaled to 8 bit). Throws std::invalid_argument
+  // for an empty image, another pixel type, or a size that differs from the previous frames' (call Reset
+  // first). `remap` is optional: lost map points to try to re-attach in this frame.
+  FrameResult Process(const cv::Mat& image, int64_t index, double stamp_s, std::span<const RemapRequest> remap = {});
+
+  // Joins the pending description task (with describe_async); a no-op when none is pending.
+  void WaitForDescriptors();
+  // The descriptor of a live track (waits for it when still pending); nullopt for an id not tracked now.
+  std::optional<Descriptor> GetDescriptor(int64_t feature_id);
+
+  // Drops every track (ids go on increasing, never reused) and forgets the previous frame.
+  void Reset();
+  size_t NumTracks() const;
+  int64_t NextFeatureId() const;
+  const FrontendOptions& options() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace mcslam::frontend

@@ -1,0 +1,469 @@
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <opencv2/imgproc.hpp>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "frontend/frontend.h"
+#include "frontend/kalman.h"
+#include "frontend/to_observations.h"
+#include "synthetic_images.h"
+
+namespace mcslam::frontend {
+namespace {
+
+using mcslam::testing::MovingTexture;
+
+const cv::Size kSize(320, 240);
+
+std::map<int64_t, Eigen::Vector2d> ById(const FrameResult& r) {
+  std::map<int64_t, Eigen::Vector2d> m;
+  for (const auto& f : r.features) m[f.feature_id] = f.uv_px;
+  return m;
+}
+
+const TrackedFeature* Find(const FrameResult& r, int64_t id) {
+  for (const auto& f : r.features)
+    if (f.feature_id == id) return &f;
+  return nullptr;
+}
+
+bool Lost(const FrameResult& r, int64_t id) {
+  return std::any_of(r.lost.begin(), r.lost.end(), [&](const LostTrack& l) { return l.feature_id == id; });
+}
+
+// ---- Kalman filter --------------------------------------------------------------------------------------
+
+TEST(ConstantVelocityKalman, LearnsAConstantVelocity) {
+  ConstantVelocityKalman kf(Eigen::Vector2d(10, 20), Eigen::Vector2d::Zero(), 0.5, 10.0);
+  const Eigen::Vector2d v(3.0, -1.5);
+  Eigen::Vector2d truth(10, 20);
+  double first_error = 0, last_error = 0;
+  for (int k = 1; k <= 10; ++k) {
+    truth += v;
+    const Eigen::Vector2d pred = kf.Predict(0.5);
+    const double e = (pred - truth).norm();
+    if (k == 1) first_error = e;
+    last_error = e;
+    kf.Update(truth, 0.5);
+  }
+  EXPECT_NEAR(first_error, v.norm(), 1e-12);  // starts at rest: the first prediction is the old position
+  EXPECT_LT(last_error, 0.05);                // noise-free constant velocity: the filter converges to it
+  EXPECT_NEAR(kf.velocity_px().x(), v.x(), 0.05);
+  EXPECT_NEAR(kf.velocity_px().y(), v.y(), 0.05);
+  // The covariance stays symmetric positive definite.
+  EXPECT_DOUBLE_EQ(kf.covariance()(0, 1), kf.covariance()(1, 0));
+  EXPECT_GT(kf.covariance().determinant(), 0.0);
+}
+
+// ---- options and input ------------------------------------------------------------------------------
+
+TEST(FrontendOptions, CheckNamesTheBadField) {
+  EXPECT_NO_THROW(FrontendOptions{}.Check());
+  auto expect_bad = [](FrontendOptions o, const std::string& field) {
+    try {
+      o.Check();
+      ADD_FAILURE() << "no exception for " << field;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+    }
+  };
+  FrontendOptions o;
+  o.max_features = 0;
+  expect_bad(o, "max_features");
+  o = {};
+  o.window_px = 20;
+  expect_bad(o, "window_px");
+  o = {};
+  o.pyramid_levels = 0;
+  expect_bad(o, "pyramid_levels");
+  o = {};
+  o.quality_level = 1.5;
+  expect_bad(o, "quality_level");
+  o = {};
+  o.remap_ratio = 0;
+  expect_bad(o, "remap_ratio");
+  o = {};
+  o.max_forward_backward_px = -1;
+  expect_bad(o, "max_forward_backward_px");
+  o = {};
+  o.cell_size_px = 0;
+  EXPECT_THROW(Frontend{o}, std::invalid_argument);
+}
+
+TEST(Frontend, RejectsBadImagesWithAClearError) {
+  Frontend fe;
+  EXPECT_THROW(fe.Process(cv::Mat(), 0, 0.0), std::invalid_argument);
+  EXPECT_THROW(fe.Process(cv::Mat(kSize, CV_32F, cv::Scalar(0)), 0, 0.0), std::invalid_argument);
+  const MovingTexture tex(kSize, 1);
+  fe.Process(tex.Frame(0, 0), 0, 0.0);
+  try {
+    fe.Process(cv::Mat(cv::Size(100, 80), CV_8U, cv::Scalar(0)), 1, 0.1);
+    FAIL() << "a frame of another size was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("100x80"), std::string::npos) << e.what();
+  }
+  // After a Reset the new size is fine.
+  fe.Reset();
+  EXPECT_NO_THROW(fe.Process(cv::Mat(cv::Size(100, 80), CV_8U, cv::Scalar(0)), 2, 0.2));
+}
+
+TEST(Frontend, ColourInputGivesTheSameTracksAsGray) {
+  const MovingTexture tex(kSize, 2);
+  Frontend gray_fe, colour_fe;
+  for (int k = 0; k < 3; ++k) {
+    const cv::Mat g = tex.Frame(1.5 * k, 0.5 * k);
+    cv::Mat bgr;
+    cv::cvtColor(g, bgr, cv::COLOR_GRAY2BGR);
+    const FrameResult a = gray_fe.Process(g, k, k * 0.1);
+    const FrameResult b = colour_fe.Process(bgr, k, k * 0.1);
+    ASSERT_EQ(a.features.size(), b.features.size());
+    for (size_t i = 0; i < a.features.size(); ++i) {
+      EXPECT_EQ(a.features[i].feature_id, b.features[i].feature_id);
+      EXPECT_EQ(a.features[i].uv_px, b.features[i].uv_px);
+    }
+  }
+}
+
+// ---- tracking ---------------------------------------------------------------------------------------
+
+TEST(Frontend, TracksAKnownSubpixelShift) {
+  const MovingTexture tex(kSize, 3);
+  Frontend fe;
+  const Eigen::Vector2d step(1.37, -0.62);
+  FrameResult prev = fe.Process(tex.Frame(0, 0), 0, 0.0);
+  ASSERT_GT(prev.features.size(), 50u);
+  std::vector<double> errors;
+  for (int k = 1; k <= 6; ++k) {
+    const FrameResult cur = fe.Process(tex.Frame(step.x() * k, step.y() * k), k, 0.1 * k);
+    const auto before = ById(prev);
+    for (const auto& f : cur.features) {
+      const auto it = before.find(f.feature_id);
+      if (it == before.end()) continue;
+      errors.push_back((f.uv_px - it->second - step).norm());
+    }
+    // A pure translation of a textured image: (almost) nothing is lost.
+    EXPECT_GE(cur.stats.tracked, static_cast<int>(0.95 * static_cast<double>(prev.features.size()))) << "frame " << k;
+    prev = cur;
+  }
+  ASSERT_GT(errors.size(), 300u);
+  std::sort(errors.begin(), errors.end());
+  const double median = errors[errors.size() / 2], worst = errors.back();
+  // LK on a smooth texture quantised to 8 bits (and cubic resampling of it): a few hundredths of a pixel
+  // typically; 0.25 px bounds the worst feature (one near a saturated or weakly textured spot).
+  EXPECT_LT(median, 0.05);
+  EXPECT_LT(worst, 0.25);
+}
+
+TEST(Frontend, DetectsOnlyInEmptyCellsWithinTheBudget) {
+  const MovingTexture tex(kSize, 4);
+  FrontendOptions o;
+  o.cell_size_px = 40;
+  o.max_new_per_cell = 2;
+  o.max_features = 1000;  // not limiting here
+  Frontend fe(o);
+  auto cell = [&](const Eigen::Vector2d& p) {
+    return static_cast<int>(p.y()) / o.cell_size_px * 100 + static_cast<int>(p.x()) / o.cell_size_px;
+  };
+  const FrameResult f0 = fe.Process(tex.Frame(0, 0), 0, 0.0);
+  std::map<int, int> per_cell;
+  for (const auto& f : f0.features) ++per_cell[cell(f.uv_px)];
+  for (const auto& [c, n] : per_cell) EXPECT_LE(n, o.max_new_per_cell) << "cell " << c;
+  // Every cell away from the border gets its corners on a textured image.
+  EXPECT_GE(per_cell.size(), 40u);  // 8 x 6 cells
+  // Pairwise min distance among the new corners.
+  for (size_t i = 0; i < f0.features.size(); ++i)
+    for (size_t j = i + 1; j < f0.features.size(); ++j)
+      EXPECT_GE((f0.features[i].uv_px - f0.features[j].uv_px).norm(), o.min_distance_px - 1e-9);
+
+  // Move far enough that tracks leave cells and a band of new image enters on the left.
+  for (int k = 1; k <= 4; ++k) {
+    const FrameResult r = fe.Process(tex.Frame(9.0 * k, 2.0 * k), k, 0.1 * k);
+    std::set<int> occupied;
+    for (const auto& f : r.features)
+      if (f.age_frames > 0) occupied.insert(cell(f.uv_px));
+    int fresh = 0;
+    for (const auto& f : r.features) {
+      if (f.age_frames > 0) continue;
+      ++fresh;
+      EXPECT_EQ(occupied.count(cell(f.uv_px)), 0u) << "new feature " << f.feature_id << " at " << f.uv_px.transpose()
+                                                   << " in a cell that holds a tracked feature (frame " << k << ")";
+    }
+    EXPECT_EQ(fresh, r.stats.detected);
+  }
+
+  // The budget: never more tracks than max_features, and filled when the image has corners to spare.
+  FrontendOptions small = o;
+  small.max_features = 25;
+  Frontend fe_small(small);
+  for (int k = 0; k < 5; ++k) {
+    const FrameResult r = fe_small.Process(tex.Frame(5.0 * k, 0), k, 0.1 * k);
+    EXPECT_LE(r.features.size(), 25u);
+    EXPECT_EQ(r.features.size(), 25u) << "frame " << k;
+  }
+}
+
+TEST(Frontend, ForwardBackwardCheckDropsACorruptedFeature) {
+  const MovingTexture tex(kSize, 5);
+  const MovingTexture other(kSize, 99);
+  FrontendOptions o;
+  o.max_patch_error = 0;  // off: the forward-backward check (and LK's status) must catch it alone
+  Frontend fe(o);
+  const FrameResult f0 = fe.Process(tex.Frame(0, 0), 0, 0.0);
+  // A feature well inside the image.
+  const TrackedFeature* victim = nullptr;
+  for (const auto& f : f0.features)
+    if (f.uv_px.x() > 100 && f.uv_px.x() < 220 && f.uv_px.y() > 80 && f.uv_px.y() < 160) {
+      victim = &f;
+      break;
+    }
+  ASSERT_NE(victim, nullptr);
+  const int64_t victim_id = victim->feature_id;
+  const Eigen::Vector2d at = victim->uv_px + Eigen::Vector2d(1, 1);
+  // Frame 1: everything moves by (1, 1), but the patch around the victim shows other texture.
+  cv::Mat f1 = tex.Frame(1, 1);
+  const cv::Rect patch(static_cast<int>(at.x()) - 8, static_cast<int>(at.y()) - 8, 17, 17);
+  other.Frame(0, 0)(patch).copyTo(f1(patch));
+  const FrameResult r1 = fe.Process(f1, 1, 0.1);
+  EXPECT_EQ(Find(r1, victim_id), nullptr) << "the corrupted feature is still tracked";
+  EXPECT_TRUE(Lost(r1, victim_id));
+  EXPECT_GE(r1.stats.lost_forward_backward + r1.stats.lost_status, 1);
+  // The other tracks far from the patch are unharmed.
+  int far_lost = 0;
+  for (const auto& l : r1.lost)
+    if ((l.last_uv_px - victim->uv_px).norm() > 30) ++far_lost;
+  EXPECT_EQ(far_lost, 0);
+}
+
+TEST(Frontend, IdsAreUniqueStableAndNeverReused) {
+  const MovingTexture tex(kSize, 6);
+  Frontend fe;
+  std::set<int64_t> ever, ended;
+  int64_t max_id = -1;
+  std::map<int64_t, Eigen::Vector2d> prev;
+  for (int k = 0; k < 12; ++k) {
+    const double dx = 4.0 * k, dy = 1.0 * k;
+    cv::Mat img = tex.Frame(dx, dy);
+    if (k == 5) img(cv::Rect(100, 60, 80, 80)).setTo(128);  // an occluder kills some tracks
+    const FrameResult r = fe.Process(img, k, 0.1 * k);
+    std::set<int64_t> here;
+    for (const auto& f : r.features) {
+      EXPECT_TRUE(here.insert(f.feature_id).second) << "id " << f.feature_id << " twice in frame " << k;
+      EXPECT_EQ(ended.count(f.feature_id), 0u) << "id " << f.feature_id << " came back without remapping";
+      const auto it = prev.find(f.feature_id);
+      if (it != prev.end()) {
+        // Stable: the same id follows the same texture point, which moved by (4, 1). A feature whose LK window
+        // overlapped the occluder's edge (frames 5 and 6) may be pulled by up to the forward-backward
+        // threshold; the others must be exact to LK's accuracy.
+        const bool near_occluder = (k == 5 || k == 6) && f.uv_px.x() > 100 - 15 && f.uv_px.x() < 180 + 15 &&
+                                   f.uv_px.y() > 60 - 15 && f.uv_px.y() < 140 + 15;
+        EXPECT_LT((f.uv_px - it->second - Eigen::Vector2d(4, 1)).norm(), near_occluder ? 1.5 : 0.25)
+            << "id " << f.feature_id << " frame " << k;
+        EXPECT_GT(f.age_frames, 0);
+      } else {
+        EXPECT_GT(f.feature_id, max_id) << "new ids increase";
+        EXPECT_EQ(f.age_frames, 0);
+      }
+    }
+    for (const auto& f : r.features) {
+      max_id = std::max(max_id, f.feature_id);
+      ever.insert(f.feature_id);
+    }
+    for (const auto& l : r.lost) {
+      EXPECT_TRUE(prev.count(l.feature_id)) << "lost id " << l.feature_id << " was not tracked";
+      ended.insert(l.feature_id);
+    }
+    if (k == 5) {
+      EXPECT_GT(r.lost.size(), 0u);
+    }
+    prev = ById(r);
+  }
+  EXPECT_EQ(fe.NextFeatureId(), max_id + 1);
+}
+
+TEST(Frontend, KalmanPredictionCutsTheInitialErrorOfLucasKanade) {
+  const MovingTexture tex(kSize, 7);
+  const Eigen::Vector2d v(4.0, -2.5);  // px per frame, constant
+  FrontendOptions with;
+  FrontendOptions without;
+  without.use_kalman_prediction = false;
+  Frontend a(with), b(without);
+  double pred_a = 0, pred_b = 0, disp = 0;
+  int n = 0;
+  for (int k = 0; k < 8; ++k) {
+    const cv::Mat img = tex.Frame(v.x() * k, v.y() * k);
+    const FrameResult ra = a.Process(img, k, 0.1 * k);
+    const FrameResult rb = b.Process(img, k, 0.1 * k);
+    if (k >= 3) {  // the filters have seen the velocity
+      pred_a += ra.stats.mean_prediction_error_px;
+      pred_b += rb.stats.mean_prediction_error_px;
+      disp += ra.stats.mean_displacement_px;
+      ++n;
+    }
+  }
+  pred_a /= n;
+  pred_b /= n;
+  disp /= n;
+  EXPECT_NEAR(disp, v.norm(), 0.1);
+  EXPECT_NEAR(pred_b, disp, 0.1);  // without prediction LK starts where the feature was
+  // Constant velocity: the prediction should be right to a fraction of a pixel (new tracks start from their
+  // neighbours' velocity, so even they start close).
+  EXPECT_LT(pred_a, 0.5);
+  EXPECT_LT(pred_a, 0.15 * pred_b);
+}
+
+// ---- descriptors ---------------------------------------------------------------------------------------
+
+TEST(Frontend, AsyncDescriptionGivesTheSameDescriptors) {
+  const MovingTexture tex(kSize, 8);
+  FrontendOptions sync_o, async_o;
+  async_o.describe_async = true;
+  Frontend s(sync_o), a(async_o);
+  for (int k = 0; k < 4; ++k) {
+    const cv::Mat img = tex.Frame(6.0 * k, 0);
+    const FrameResult rs = s.Process(img, k, 0.1 * k);
+    const FrameResult ra = a.Process(img, k, 0.1 * k);
+    ASSERT_EQ(rs.features.size(), ra.features.size());
+    // Work the caller would do here (pose estimation) overlaps the description.
+    for (const auto& f : ra.features) {
+      const auto ds = s.GetDescriptor(f.feature_id);
+      const auto da = a.GetDescriptor(f.feature_id);
+      ASSERT_TRUE(ds && da) << "id " << f.feature_id;
+      EXPECT_EQ(*ds, *da);
+    }
+    for (const auto& l : ra.lost) EXPECT_TRUE(l.descriptor.has_value()) << "lost id " << l.feature_id;
+  }
+  EXPECT_FALSE(a.GetDescriptor(-1).has_value());
+}
+
+// ---- remapping --------------------------------------------------------------------------------------------
+
+// Tracks for two frames, loses feature `A` under an occluder in frame 2, and returns the frame-3 image with
+// A's true position there.
+struct RemapScene {
+  MovingTexture tex{kSize, 11};
+  Eigen::Vector2d step{1.0, 0.5};
+  int64_t a_id = -1;
+  int64_t b_id = -1;  // another feature, far from A
+  Descriptor a_desc{}, b_desc{};
+  Eigen::Vector2d a_at_frame3;
+
+  void Run(Frontend& fe) {
+    const FrameResult r0 = fe.Process(tex.Frame(0, 0), 0, 0.0);
+    const FrameResult r1 = fe.Process(tex.Frame(step.x(), step.y()), 1, 0.1);
+    for (const auto& f : r1.features) {
+      const double du = f.uv_px.x() - 160, dv = f.uv_px.y() - 120;
+      if (f.age_frames > 0 && std::abs(du) < 40 && std::abs(dv) < 40 && a_id < 0) a_id = f.feature_id;
+      if (f.age_frames > 0 && f.uv_px.x() > 250 && b_id < 0) b_id = f.feature_id;
+    }
+    ASSERT_GE(a_id, 0);
+    ASSERT_GE(b_id, 0);
+    a_desc = *fe.GetDescriptor(a_id);
+    b_desc = *fe.GetDescriptor(b_id);
+    const Eigen::Vector2d a1 = ById(r1).at(a_id);
+    cv::Mat f2 = tex.Frame(2 * step.x(), 2 * step.y());
+    const cv::Point c(static_cast<int>(a1.x() + step.x()), static_cast<int>(a1.y() + step.y()));
+    f2(cv::Rect(c.x - 20, c.y - 20, 41, 41)).setTo(128);
+    const FrameResult r2 = fe.Process(f2, 2, 0.2);
+    ASSERT_TRUE(Lost(r2, a_id));
+    for (const auto& l : r2.lost)
+      if (l.feature_id == a_id) {
+        ASSERT_TRUE(l.descriptor.has_value());
+        EXPECT_EQ(*l.descriptor, a_desc);
+      }
+    a_at_frame3 = a1 + 2 * step;
+  }
+  cv::Mat Frame3() const { return tex.Frame(3 * step.x(), 3 * step.y()); }
+};
+
+TEST(Frontend, RemapReattachesALostFeatureByDescriptorNearItsProjection) {
+  RemapScene scene;
+  Frontend fe;
+  ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+  // The back end's projection is a few pixels off, as it would be.
+  const RemapRequest req{scene.a_id, scene.a_desc, scene.a_at_frame3 + Eigen::Vector2d(4, -3)};
+  const FrameResult r3 = fe.Process(scene.Frame3(), 3, 0.3, std::span<const RemapRequest>(&req, 1));
+  ASSERT_EQ(r3.remapped_ids, std::vector<int64_t>{scene.a_id})
+      << "no_candidate " << r3.stats.remap_no_candidate << " no_match " << r3.stats.remap_no_match;
+  const TrackedFeature* f = Find(r3, scene.a_id);
+  ASSERT_NE(f, nullptr);
+  EXPECT_TRUE(f->remapped);
+  EXPECT_EQ(f->age_frames, 0);
+  // Corners are found on whole pixels while the texture moved by fractions: within a pixel and a half.
+  EXPECT_LT((f->uv_px - scene.a_at_frame3).norm(), 1.5);
+  // Ids are still unique and the re-attached track goes on being tracked.
+  std::set<int64_t> ids;
+  for (const auto& g : r3.features) EXPECT_TRUE(ids.insert(g.feature_id).second);
+  const FrameResult r4 = fe.Process(scene.tex.Frame(4 * scene.step.x(), 4 * scene.step.y()), 4, 0.4);
+  const TrackedFeature* g = Find(r4, scene.a_id);
+  ASSERT_NE(g, nullptr);
+  EXPECT_FALSE(g->remapped);
+  EXPECT_LT((g->uv_px - f->uv_px - scene.step).norm(), 0.3);
+  EXPECT_EQ(*fe.GetDescriptor(scene.a_id), scene.a_desc);
+}
+
+TEST(Frontend, RemapRefusesAWrongDescriptor) {
+  RemapScene scene;
+  Frontend fe;
+  ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+  // A's id and projection, but the look of another feature: no corner in the window matches it.
+  const RemapRequest req{scene.a_id, scene.b_desc, scene.a_at_frame3};
+  const FrameResult r3 = fe.Process(scene.Frame3(), 3, 0.3, std::span<const RemapRequest>(&req, 1));
+  EXPECT_TRUE(r3.remapped_ids.empty());
+  EXPECT_EQ(Find(r3, scene.a_id), nullptr);
+  EXPECT_EQ(r3.stats.remap_no_match, 1);
+}
+
+TEST(Frontend, RemapRefusesOutsideTheWindowTheImageOrForALiveId) {
+  RemapScene scene;
+  Frontend fe;
+  ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+  // Live id: B is tracked.
+  const std::vector<RemapRequest> reqs{
+      {scene.a_id, scene.a_desc, scene.a_at_frame3 + Eigen::Vector2d(45, 0)},  // A's corner is 45 px away: outside
+      {scene.a_id + 100000, scene.a_desc, scene.a_at_frame3},                  // never issued
+      {scene.b_id, scene.b_desc, scene.a_at_frame3},                           // live
+  };
+  const FrameResult r3 = fe.Process(scene.Frame3(), 3, 0.3, reqs);
+  EXPECT_TRUE(r3.remapped_ids.empty());
+  EXPECT_EQ(Find(r3, scene.a_id), nullptr);
+  EXPECT_EQ(r3.stats.remap_requests, 3);
+  EXPECT_EQ(r3.stats.remap_refused_id, 2);
+  EXPECT_EQ(r3.stats.remap_no_match + r3.stats.remap_no_candidate, 1);
+
+  // A projection outside the image is not searched.
+  Frontend fe2;
+  RemapScene scene2;
+  ASSERT_NO_FATAL_FAILURE(scene2.Run(fe2));
+  const RemapRequest out{scene2.a_id, scene2.a_desc, Eigen::Vector2d(-5, 50)};
+  const FrameResult r = fe2.Process(scene2.Frame3(), 3, 0.3, std::span<const RemapRequest>(&out, 1));
+  EXPECT_EQ(r.stats.remap_outside, 1);
+  EXPECT_TRUE(r.remapped_ids.empty());
+}
+
+// ---- output ---------------------------------------------------------------------------------------------
+
+TEST(Frontend, ConvertsToTheBackEndsObservations) {
+  const MovingTexture tex(kSize, 12);
+  Frontend fe;
+  const FrameResult r = fe.Process(tex.Frame(0, 0), 7, 1.25);
+  const slam::FrameObservations obs = ToObservations(r);
+  EXPECT_EQ(obs.index, 7);
+  EXPECT_EQ(obs.stamp_s, 1.25);
+  ASSERT_EQ(obs.features.size(), r.features.size());
+  for (size_t i = 0; i < r.features.size(); ++i) {
+    EXPECT_EQ(obs.features[i].feature_id, r.features[i].feature_id);
+    EXPECT_EQ(obs.features[i].uv_px, r.features[i].uv_px);
+  }
+  EXPECT_GE(r.stats.detect_ms, 0.0);
+  EXPECT_GE(r.stats.total_ms, r.stats.detect_ms);
+}
+
+}  // namespace
+}  // namespace mcslam::frontend
