@@ -1,5 +1,6 @@
-// mcslam run: the SLAM job. For now pose tracking against a known map (--known-map), the paper's
-// precision test; the full back end (initialisation, mapping) comes with the back-end issue.
+// mcslam run: the SLAM job on a folder of observations: the full back end (two-view initialisation,
+// Monte Carlo tracking and mapping), or, with --known-map, pose tracking against the folder's ground-truth
+// map (the paper's precision test).
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -11,6 +12,8 @@
 #include "apps/commands.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
+#include "apps/slam_job.h"
+#include "io/ply.h"
 #include "eval/trajectory_eval.h"
 
 namespace mcslam::apps {
@@ -20,7 +23,10 @@ namespace {
 struct RunArgs {
   std::string input, out, backend = "cpu";
   bool known_map = false;
+  bool gt_scale = false;
+  std::string init_method = "8point";
   PoseFlags pose;
+  slam::SystemOptions system;
   double smooth_alpha = 0.5;
 };
 
@@ -30,10 +36,76 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+void RunFullSlam(const RunArgs& a) {
+  slam::SystemOptions options = a.system;
+  options.tracker = a.pose.Resolve();
+  options.smoother.alpha = a.smooth_alpha;
+  options.seed = options.tracker.seed;
+  options.init.method =
+      a.init_method == "5point" ? geometry::EssentialMethod::kFivePointOpenCV : geometry::EssentialMethod::kEightPoint;
+  options.Check();
+  auto pose_kernel = MakePoseKernelFor(a.backend);
+  auto point_kernel = MakePointKernelFor(a.backend);
+  const SequenceInput input = LoadSequenceInput(a.input);
+  std::filesystem::create_directories(a.out);
+  const std::filesystem::path out(a.out);
+  spdlog::info("SLAM: {} frames, {} hypotheses/frame, {} samples/point, backend {}", input.frames.size(),
+               options.tracker.hypotheses, options.mapping.samples, a.backend);
+  InstallInterruptHandler();
+  size_t done = 0;
+  bool announced = false;
+  bool was_lost = false;
+  const SlamRunResult res = RunSlam(
+      input, options, std::move(pose_kernel), std::move(point_kernel), a.gt_scale,
+      [&](const slam::FrameReport& r) {
+        if (++done % 50 == 0) spdlog::info("frame {}/{}", r.index + 1, input.frames.size());
+        if (r.initialisation && !r.note.empty() && !announced) spdlog::info("{}", r.note), announced = true;
+        // Log the changes of state, not every lost frame.
+        const bool lost = r.status == slam::FrameStatus::kLost;
+        if (lost && !was_lost) spdlog::warn("frame {} lost: {}", r.index, r.note);
+        if (!lost && was_lost && r.status == slam::FrameStatus::kTracked) spdlog::info("frame {}: tracking resumed", r.index);
+        was_lost = lost;
+      },
+      [] { return Interrupted(); });
+  if (Interrupted()) spdlog::warn("interrupted: writing the {} frames done so far", res.reports.size());
+
+  // Outputs first: whatever happens next, what was computed is kept.
+  const io::Trajectory traj = ReportsToTrajectory(res.reports, false);
+  io::WriteTum((out / "trajectory.txt").string(), traj);
+  io::WriteTum((out / "trajectory_smoothed.txt").string(), ReportsToTrajectory(res.reports, true));
+  io::WritePly((out / "map.ply").string(), res.map);
+  std::optional<eval::TrajectoryErrors> err;
+  if (!input.groundtruth.empty() && traj.size() >= 3) err = eval::EvaluateTrajectory(input.groundtruth, traj, {});
+  WriteSlamFramesCsv((out / "frames.csv").string(), res.reports, err ? &*err : nullptr);
+
+  int tracked = 0, lost = 0, waiting = 0, keyframes = 0;
+  std::vector<double> ms;
+  for (const auto& r : res.reports) {
+    tracked += r.status == slam::FrameStatus::kTracked;
+    lost += r.status == slam::FrameStatus::kLost;
+    waiting += r.status == slam::FrameStatus::kWaitingForInit;
+    keyframes += r.keyframe;
+    if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
+  }
+  std::string line = fmt::format("frames={} tracked={} lost={} not_initialised={} keyframes={} map_points={} "
+                                 "frame_ms_median={:.3f} fps={:.1f}",
+                                 res.reports.size(), tracked, lost, waiting, keyframes, res.map.points.size(),
+                                 Median(ms), res.reports.size() / std::max(res.wall_s, 1e-9));
+  if (err)
+    line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} scale={:.6g}", err->ate_m.rmse,
+                        err->ate_m.mean, err->rot_deg.mean, err->alignment_result.gt_world_from_est_world.scale);
+  if (!res.reports.empty()) line += fmt::format(" final_reproj_mean_px={:.4f}", res.reports.back().reproj_mean_px);
+  fmt::print("{}\n", line);
+  if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
+  if (!res.initialised)
+    throw std::runtime_error(fmt::format(
+        "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
+        "move by a median of {} px with enough parallax between two frames",
+        res.reports.size(), a.out, options.init.min_median_displacement_px));
+}
+
 void Run(const RunArgs& a) {
-  if (!a.known_map)
-    throw std::invalid_argument("mcslam run: only --known-map tracking exists in this version (the full back end, "
-                                "with initialisation and mapping, is not built yet)");
+  if (!a.known_map) return RunFullSlam(a);
   slam::KnownMapOptions options;
   options.tracker = a.pose.Resolve();
   options.smoother.alpha = a.smooth_alpha;
@@ -90,10 +162,38 @@ void Run(const RunArgs& a) {
 
 void RegisterRun(CLI::App& app) {
   auto args = std::make_shared<RunArgs>();
-  CLI::App* cmd = app.add_subcommand("run", "Track a sequence: writes trajectory.txt, trajectory_smoothed.txt, frames.csv");
+  CLI::App* cmd = app.add_subcommand(
+      "run", "SLAM on a sequence: writes trajectory.txt, trajectory_smoothed.txt, map.ply, frames.csv");
   cmd->add_option("input", args->input, "Input folder (as written by `mcslam synth`)")->required();
   cmd->add_option("--out", args->out, "Output folder")->required();
-  cmd->add_flag("--known-map", args->known_map, "Track against the folder's ground-truth map (map_gt.ply)");
+  cmd->add_flag("--known-map", args->known_map, "Track against the folder's ground-truth map (map_gt.ply) instead of building one");
+  cmd->add_flag("--gt-scale", args->gt_scale, "Take the first baseline's length from the ground truth (as the paper does)");
+  cmd->add_option("--init-method", args->init_method, "Essential matrix: 8point (normalised 8-point + RANSAC + LM) or 5point (OpenCV)")
+      ->check(CLI::IsMember({"8point", "5point"}))
+      ->capture_default_str();
+  cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
+                  "Median feature displacement that starts the initialisation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--samples", args->system.mapping.samples, "Monte Carlo samples per adjusted point")
+      ->check(CLI::Range(1, 1 << 22))
+      ->capture_default_str();
+  cmd->add_option("--window", args->system.mapping.window, "Keyframes in the Fibonacci window of the point adjustment")
+      ->check(CLI::Range(2, 64))
+      ->capture_default_str();
+  cmd->add_option("--adjust-px", args->system.mapping.adjust_threshold_px,
+                  "Residual (median over the window) above which a point that no sample fixes is an outlier")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--candidate-px", args->system.mapping.candidate_threshold_px,
+                  "Residual above which a point is re-sampled (the paper: the same as --adjust-px)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("!--no-adjust", args->system.mapping.adjust, "Skip the Monte Carlo point adjustment");
+  cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
+                  "Smallest parallax for a new point (largest angle between its viewing rays)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_option("--smooth-alpha", args->smooth_alpha, "DESP smoothing weight of the new pose, (0, 1]")
       ->check(CLI::Range(1e-6, 1.0))
       ->capture_default_str();

@@ -29,23 +29,31 @@ std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::Observat
   return out;
 }
 
-KnownMapInput LoadKnownMapInput(const std::string& dir) {
+SequenceInput LoadSequenceInput(const std::string& dir) {
   if (!fs::is_directory(dir)) throw std::runtime_error(fmt::format("input folder '{}' does not exist", dir));
   auto need = [&](const char* name) {
     const fs::path p = fs::path(dir) / name;
-    if (!fs::exists(p)) throw std::runtime_error(fmt::format("'{}' is missing (known-map mode needs it)", p.string()));
+    if (!fs::exists(p)) throw std::runtime_error(fmt::format("'{}' is missing", p.string()));
     return p.string();
   };
-  KnownMapInput in;
+  SequenceInput in;
   in.camera = io::ReadCameraYaml(need("camera.yaml"));
   in.frames = ToSlamFrames(io::ReadObservations(need("observations.txt")));
-  const io::PointCloud cloud = io::ReadPly(need("map_gt.ply"));
-  if (cloud.ids.size() != cloud.points.size())
-    throw std::runtime_error(fmt::format("'{}/map_gt.ply' has no per-point 'id' property", dir));
-  for (size_t i = 0; i < cloud.points.size(); ++i) in.map[cloud.ids[i]] = cloud.points[i];
   const fs::path gt = fs::path(dir) / "groundtruth.txt";
   if (fs::exists(gt)) in.groundtruth = io::ReadTum(gt.string());
   if (in.frames.empty()) throw std::runtime_error(fmt::format("'{}/observations.txt' holds no frame", dir));
+  return in;
+}
+
+KnownMapInput LoadKnownMapInput(const std::string& dir) {
+  KnownMapInput in;
+  static_cast<SequenceInput&>(in) = LoadSequenceInput(dir);
+  const fs::path ply = fs::path(dir) / "map_gt.ply";
+  if (!fs::exists(ply)) throw std::runtime_error(fmt::format("'{}' is missing (known-map mode needs it)", ply.string()));
+  const io::PointCloud cloud = io::ReadPly(ply.string());
+  if (cloud.ids.size() != cloud.points.size())
+    throw std::runtime_error(fmt::format("'{}' has no per-point 'id' property", ply.string()));
+  for (size_t i = 0; i < cloud.points.size(); ++i) in.map[cloud.ids[i]] = cloud.points[i];
   return in;
 }
 

@@ -13,15 +13,21 @@
 
 namespace mcslam::apps {
 
-struct KnownMapInput {
+// A folder of observations as `mcslam synth` writes it (or any front end could).
+struct SequenceInput {
   PinholeCamera camera;
   std::vector<slam::FrameObservations> frames;
-  std::unordered_map<int64_t, Eigen::Vector3d> map;
   io::Trajectory groundtruth;  // world_from_cam; empty when the folder has none
 };
+// Reads DIR/camera.yaml, DIR/observations.txt and (when present) DIR/groundtruth.txt. Throws naming the
+// missing or bad file; an observation file with no frame is an error.
+SequenceInput LoadSequenceInput(const std::string& dir);
 
-// Reads DIR/camera.yaml, DIR/observations.txt, DIR/map_gt.ply and (when present) DIR/groundtruth.txt.
-// Throws naming the missing or bad file.
+struct KnownMapInput : SequenceInput {
+  std::unordered_map<int64_t, Eigen::Vector3d> map;
+};
+
+// LoadSequenceInput plus DIR/map_gt.ply (with point ids).
 KnownMapInput LoadKnownMapInput(const std::string& dir);
 KnownMapInput KnownMapInputFromSequence(const sim::SyntheticSequence& sequence);
 std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames);

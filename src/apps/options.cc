@@ -46,13 +46,26 @@ void AddBackendFlag(CLI::App* cmd, std::string* backend) {
       ->capture_default_str();
 }
 
-std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backend) {
+namespace {
+// True for the CPU backend; throws when CUDA is asked for and cannot be had.
+bool UseCpu(const std::string& backend) {
   const bool gpu = compute::CudaDeviceCount() > 0;
-  if (backend == "cpu" || (backend == "auto" && !gpu)) return compute::MakeCpuPoseKernel();
+  if (backend == "cpu" || (backend == "auto" && !gpu)) return true;
   if (!compute::CudaCompiled())
     throw std::invalid_argument("--backend cuda: this build has no CUDA backend (nvcc was not found when it was configured)");
   if (!gpu) throw std::invalid_argument("--backend cuda: " + compute::CudaDeviceDescription());
-  throw std::invalid_argument("--backend cuda: the CUDA pose kernel is not implemented yet (issue: CUDA backend)");
+  throw std::invalid_argument("--backend cuda: the CUDA kernels are not implemented yet (issue: CUDA backend)");
+}
+}  // namespace
+
+std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backend) {
+  UseCpu(backend);
+  return compute::MakeCpuPoseKernel();
+}
+
+std::unique_ptr<compute::PointKernel> MakePointKernelFor(const std::string& backend) {
+  UseCpu(backend);
+  return compute::MakeCpuPointKernel();
 }
 
 namespace {

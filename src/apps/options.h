@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "compute/point_kernel.h"
 #include "compute/pose_kernel.h"
 #include "slam/pose_tracker.h"
 
@@ -21,6 +22,7 @@ struct PoseFlags {
 
 // --backend cpu|cuda|auto. cuda without a CUDA build or a device is an error, never a silent fallback.
 std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backend);
+std::unique_ptr<compute::PointKernel> MakePointKernelFor(const std::string& backend);
 void AddBackendFlag(CLI::App* cmd, std::string* backend);
 
 // Ctrl-C: the first SIGINT asks the running job to stop and write what it has; a second one kills.

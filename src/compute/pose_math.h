@@ -108,18 +108,28 @@ MCSLAM_HOST_DEVICE MCSLAM_INLINE ScaledPoseT<F> MakeScaledPoseT(const F q[4], co
 // behind the camera costs the cap. (u, v) is the observed feature, undistorted, minus the principal point.
 // Division-free form: |(X'/Z − u, Y'/Z − v)| = e² / sqrt(e² Z²) with e = (X' − u Z, Y' − v Z), one
 // reciprocal square root instead of a division and a square root.
-template <typename M, typename F>
-MCSLAM_HOST_DEVICE MCSLAM_INLINE F ReprojectionDistanceT(const ScaledPoseT<F>& p, float x, float y, float z, float u,
-                                                         float v, const PoseScoringParams& k, F cap) {
+// Either the pose (P, pose kernel: one hypothesis per lane) or the point (X, point kernel: one sample per
+// lane) may be the SIMD type; F is the result type (the vector type when either is).
+template <typename M, typename F, typename P, typename X>
+MCSLAM_HOST_DEVICE MCSLAM_INLINE F ReprojectionDistanceT(const ScaledPoseT<P>& p, X x, X y, X z, float u, float v,
+                                                         const PoseScoringParams& k, F cap) {
   // Written t + r0 x + r1 y + r2 z so that each row contracts to three fused multiply-adds.
-  const F X = p.t[0] + p.r[0] * x + p.r[1] * y + p.r[2] * z;
-  const F Y = p.t[1] + p.r[3] * x + p.r[4] * y + p.r[5] * z;
-  const F Z = p.t[2] + p.r[6] * x + p.r[7] * y + p.r[8] * z;
-  const F ex = X - u * Z;
-  const F ey = Y - v * Z;
+  const F Xc = p.t[0] + p.r[0] * x + p.r[1] * y + p.r[2] * z;
+  const F Yc = p.t[1] + p.r[3] * x + p.r[4] * y + p.r[5] * z;
+  const F Zc = p.t[2] + p.r[6] * x + p.r[7] * y + p.r[8] * z;
+  const F ex = Xc - u * Zc;
+  const F ey = Yc - v * Zc;
   const F e2 = ex * ex + ey * ey;
-  const F d = e2 * M::Rsqrt(e2 * (Z * Z) + 1e-30f);
-  return M::SelectGreater(Z, k.min_depth, M::Min(d, cap), cap);
+  const F d = e2 * M::Rsqrt(e2 * (Zc * Zc) + 1e-30f);
+  return M::SelectGreater(Zc, k.min_depth, M::Min(d, cap), cap);
+}
+
+// Eq. 7 (point hypotheses, Algorithm 2): a sample around the point, z = z_c + sigma * n.
+template <typename F>
+MCSLAM_HOST_DEVICE MCSLAM_INLINE void PerturbPointT(const float c[3], const float sigma[3], F n0, F n1, F n2, F z[3]) {
+  z[0] = c[0] + sigma[0] * n0;
+  z[1] = c[1] + sigma[1] * n1;
+  z[2] = c[2] + sigma[2] * n2;
 }
 
 // Scalar entry points (CUDA kernels, host reference).
@@ -132,7 +142,7 @@ MCSLAM_HOST_DEVICE MCSLAM_INLINE ScaledPose MakeScaledPose(const float q[4], con
 }
 MCSLAM_HOST_DEVICE MCSLAM_INLINE float ReprojectionDistance(const ScaledPose& p, float x, float y, float z, float u,
                                                             float v, const PoseScoringParams& k) {
-  return ReprojectionDistanceT<ScalarMath, float>(p, x, y, z, u, v, k, k.max_distance_px);
+  return ReprojectionDistanceT<ScalarMath, float, float, float>(p, x, y, z, u, v, k, k.max_distance_px);
 }
 
 }  // namespace mcslam::compute

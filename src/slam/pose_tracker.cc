@@ -96,12 +96,21 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   PoseEstimate est;
   est.cam_from_world = prev;
 
+  // The pivot m (see PoseTrackerOptions::pivot): the scoring points are passed as x - m, the pose as
+  // (R, t + R m), and the winner converted back.
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  int n_scoring = 0;
+  if (options_.pivot == PoseTrackerOptions::Pivot::kCentroid) {
+    for (const PointObservation& o : obs)
+      if (o.was_inlier) m += o.point_in_world, ++n_scoring;
+    if (n_scoring > 0) m /= n_scoring;
+  }
   sx_.clear(), sy_.clear(), sz_.clear(), su_.clear(), sv_.clear();
   for (const PointObservation& o : obs) {
     if (!o.was_inlier) continue;
-    sx_.push_back(static_cast<float>(o.point_in_world.x()));
-    sy_.push_back(static_cast<float>(o.point_in_world.y()));
-    sz_.push_back(static_cast<float>(o.point_in_world.z()));
+    sx_.push_back(static_cast<float>(o.point_in_world.x() - m.x()));
+    sy_.push_back(static_cast<float>(o.point_in_world.y() - m.y()));
+    sz_.push_back(static_cast<float>(o.point_in_world.z() - m.z()));
     su_.push_back(static_cast<float>(o.uv_undistorted_px.x() - camera_.cx));
     sv_.push_back(static_cast<float>(o.uv_undistorted_px.y() - camera_.cy));
   }
@@ -124,7 +133,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   const Eigen::Quaterniond q0 = prev.q.normalized();
   s.q[0] = static_cast<float>(q0.w()), s.q[1] = static_cast<float>(q0.x());
   s.q[2] = static_cast<float>(q0.y()), s.q[3] = static_cast<float>(q0.z());
-  for (int k = 0; k < 3; ++k) s.t[k] = static_cast<float>(prev.t[k]);
+  const Eigen::Vector3d t_pivot = prev.t + q0 * m;
+  for (int k = 0; k < 3; ++k) s.t[k] = static_cast<float>(t_pivot[k]);
   compute::PoseScoringParams params;
   params.fx = static_cast<float>(camera_.fx);
   params.fy = static_cast<float>(camera_.fy);
@@ -144,8 +154,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     for (int k = 0; k < 3; ++k) s.t[k] = best.t[k];
   }
 
-  est.cam_from_world = Pose(Eigen::Quaterniond(best.q[0], best.q[1], best.q[2], best.q[3]),
-                            Eigen::Vector3d(best.t[0], best.t[1], best.t[2]));
+  const Eigen::Quaterniond q_best(best.q[0], best.q[1], best.q[2], best.q[3]);
+  est.cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
   est.score = best.score;
   est.inliers = ClassifyInliers(est.cam_from_world, obs, residuals, inliers);
   double sum = 0;

@@ -33,6 +33,14 @@ struct PoseTrackerOptions {
   int min_points = 6;                  // fewer scoring points than this: the frame is lost, nothing is scored
   int min_inliers = 8;                 // fewer inliers at the best pose: the frame is lost
   double keyframe_min_inlier_ratio = 0.6;  // keyframe when inliers >= ratio * scored points (and >= min_inliers)
+  // Where the rotation samples pivot. Eq. 2 perturbs q and t of cam_from_world, so a rotation sample turns
+  // the scene about the world origin; when that origin is far from the scene (a SLAM map starts at the first
+  // camera, 3 m away) each rotation sample also throws the scene sideways and only hypotheses whose
+  // translation happens to cancel it score well. kCentroid draws the same hypotheses of Eq. 2 in a world
+  // moved to the centroid of the scoring points (x' = x - m, t' = t + R m), which leaves the scene's
+  // projection nearly in place under rotation samples; kOrigin is the paper's literal form.
+  enum class Pivot { kCentroid, kOrigin };
+  Pivot pivot = Pivot::kCentroid;
   int rounds = 3;                      // resample around the best with shrinking spread; 1 = the paper's one-shot sampling
   double round_shrink = 0.35;          // spread factor from one round to the next
   void Check() const;                  // throws std::invalid_argument naming the bad field

@@ -2,8 +2,6 @@
 // runs in lock-step, each point's data broadcast), chunks of hypotheses spread over every core (oneTBB).
 #include <algorithm>
 #include <cstring>
-
-#include <immintrin.h>
 #include <limits>
 
 #include <oneapi/tbb/blocked_range.h>
@@ -11,6 +9,7 @@
 #include <oneapi/tbb/parallel_reduce.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include "compute/cpu/simd.h"
 #include "compute/pose_kernel.h"
 #include "core/random.h"
 
@@ -41,41 +40,10 @@ void NormalTable::Fill(uint64_t seed, uint32_t stream, uint64_t epoch) {
 
 namespace {
 
-// One hypothesis per SIMD lane (GCC vector extensions): the per-hypothesis templates of pose_math.h are
-// instantiated with VecF, and each point's data is broadcast to all lanes.
-#if defined(__AVX512F__)
-constexpr int kLanes = 16;
-typedef float VecF __attribute__((vector_size(64)));
-inline VecF RsqrtApprox(VecF x) { return _mm512_rsqrt14_ps(x); }  // |rel err| < 2^-14
-#elif defined(__AVX__)
-constexpr int kLanes = 8;
-typedef float VecF __attribute__((vector_size(32)));
-inline VecF RsqrtApprox(VecF x) { return _mm256_rsqrt_ps(x); }  // |rel err| < 1.5 * 2^-12
-#else
-constexpr int kLanes = 4;
-typedef float VecF __attribute__((vector_size(16)));
-inline VecF RsqrtApprox(VecF x) { return _mm_rsqrt_ps(x); }
-#endif
-
-struct SimdMath {
-  // The hardware estimate alone (relative error < 2^-14 with AVX-512, 1.5 * 2^-12 with AVX): a Newton step
-  // would cost 4 of the loop's 20 multiply-class operations, the ones that bound its speed, and it changes
-  // neither the chosen pose nor the tracking accuracy measurably (docs/pose_estimation.md).
-  static MCSLAM_INLINE VecF Rsqrt(VecF x) { return RsqrtApprox(x); }
-  // With one Newton step (~1e-7 relative): hypotheses are unit quaternions to float precision.
-  static MCSLAM_INLINE VecF RsqrtAccurate(VecF x) {
-    const VecF y = RsqrtApprox(x);
-    return y * (1.5f - 0.5f * x * y * y);
-  }
-  static MCSLAM_INLINE VecF Min(VecF a, VecF b) { return a < b ? a : b; }
-  static MCSLAM_INLINE VecF SelectGreater(VecF x, float than, VecF a, VecF b) { return x > than ? a : b; }
-};
-
-inline VecF LoadVec(const float* p) {
-  VecF v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
+using cpu::kLanes;
+using cpu::LoadVec;
+using cpu::SimdMath;
+using cpu::VecF;
 
 constexpr int kChunk = 256;  // hypotheses per task; a multiple of kLanes
 static_assert(kChunk % kLanes == 0);
@@ -101,7 +69,7 @@ void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseS
                                  LoadVec(normals.column(6) + h), q, t);
     const ScaledPoseT<VecF> p = MakeScaledPoseT<VecF>(q, t, k.fx, k.fy);
     VecF acc = cap * 0.0f;
-    for (int j = 0; j < np; ++j) acc += ReprojectionDistanceT<SimdMath, VecF>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
+    for (int j = 0; j < np; ++j) acc += ReprojectionDistanceT<SimdMath, VecF, VecF, float>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
     const int valid = n - b < kLanes ? n - b : kLanes;
     if (valid == kLanes) {
       std::memcpy(out + b, &acc, sizeof acc);

@@ -1,0 +1,95 @@
+#include "apps/slam_job.h"
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+namespace mcslam::apps {
+
+SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& options,
+                      std::unique_ptr<compute::PoseKernel> pose_kernel,
+                      std::unique_ptr<compute::PointKernel> point_kernel, bool gt_scale,
+                      const std::function<void(const slam::FrameReport&)>& on_frame,
+                      const std::function<bool()>& stop) {
+  slam::System system(input.camera, options, std::move(pose_kernel), std::move(point_kernel));
+  if (gt_scale) {
+    if (input.groundtruth.empty()) throw std::invalid_argument("--gt-scale needs a ground truth (groundtruth.txt)");
+    const io::Trajectory& gt = input.groundtruth;
+    system.SetBaselineOracle([&gt](double a, double b) -> std::optional<double> {
+      auto nearest = [&gt](double t) -> int {
+        int best = -1;
+        for (size_t i = 0; i < gt.size(); ++i)
+          if (std::abs(gt.stamps_s[i] - t) <= 1e-3 && (best < 0 || std::abs(gt.stamps_s[i] - t) < std::abs(gt.stamps_s[best] - t)))
+            best = static_cast<int>(i);
+        return best;
+      };
+      const int i = nearest(a), j = nearest(b);
+      if (i < 0 || j < 0) return std::nullopt;
+      return (gt.world_from_cam[i].t - gt.world_from_cam[j].t).norm();
+    });
+  }
+  SlamRunResult res;
+  std::map<int64_t, size_t> slot_of_index;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (const slam::FrameObservations& f : input.frames) {
+    if (stop && stop()) break;
+    for (const slam::FrameReport& r : system.Process(f)) {
+      auto it = slot_of_index.find(r.index);
+      if (it == slot_of_index.end()) {
+        slot_of_index[r.index] = res.reports.size();
+        res.reports.push_back(r);
+      } else {
+        res.reports[it->second] = r;  // initialisation resolves frames reported as waiting before
+      }
+      if (on_frame) on_frame(r);
+    }
+  }
+  res.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.initialised = system.initialised();
+  for (const slam::MapPoint& p : system.map().points()) {
+    if (p.state == slam::PointState::kRemoved) continue;
+    res.map.points.push_back(p.position_in_world);
+    res.map.ids.push_back(p.id);
+  }
+  return res;
+}
+
+io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed) {
+  io::Trajectory t;
+  for (const slam::FrameReport& r : reports) {
+    if (!r.has_pose) continue;
+    t.stamps_s.push_back(r.stamp_s);
+    t.world_from_cam.push_back((smoothed ? r.smoothed_cam_from_world : r.cam_from_world).Inverse());
+  }
+  return t;
+}
+
+void WriteSlamFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                        const eval::TrajectoryErrors* errors) {
+  std::map<double, const eval::FrameError*> err_of_stamp;
+  if (errors)
+    for (const eval::FrameError& e : errors->frames) err_of_stamp[e.stamp_s] = &e;
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
+  f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
+       "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,note\n";
+  for (const slam::FrameReport& r : reports) {
+    std::string te, re;
+    if (auto it = err_of_stamp.find(r.stamp_s); r.has_pose && it != err_of_stamp.end())
+      te = fmt::format("{:.6g}", it->second->trans_err_m), re = fmt::format("{:.6g}", it->second->rot_err_deg);
+    std::string note = r.note;
+    for (char& c : note)
+      if (c == ',' || c == '\n') c = ';';
+    f << fmt::format("{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{}\n", r.index,
+                     r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
+                     r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px,
+                     r.track_ms, r.map_ms, r.adjust_ms, r.init_ms, te, re, note);
+  }
+  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
+}
+
+}  // namespace mcslam::apps

@@ -1,0 +1,38 @@
+#pragma once
+// The full SLAM job on a folder of observations: the System of the slam layer over every frame, and the
+// outputs users keep (trajectories, map, per-frame CSV with errors when the ground truth is known).
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "apps/known_map_job.h"
+#include "eval/trajectory_eval.h"
+#include "io/ply.h"
+#include "slam/system.h"
+
+namespace mcslam::apps {
+
+struct SlamRunResult {
+  std::vector<slam::FrameReport> reports;  // one per frame, in order (the final report of each)
+  bool initialised = false;
+  io::PointCloud map;                       // active and lost points, with ids
+  double wall_s = 0;
+};
+
+// Runs the System over every frame. gt_scale: the first baseline takes its length from the ground truth.
+// Stops early, keeping what it has, when `stop` returns true.
+SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& options,
+                      std::unique_ptr<compute::PoseKernel> pose_kernel,
+                      std::unique_ptr<compute::PointKernel> point_kernel, bool gt_scale,
+                      const std::function<void(const slam::FrameReport&)>& on_frame = {},
+                      const std::function<bool()>& stop = {});
+
+io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed);
+
+// frames.csv: index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,
+// reproj_mean_px,reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,note
+// (the error columns are empty without ground truth or for frames without a pose).
+void WriteSlamFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                        const eval::TrajectoryErrors* errors);
+
+}  // namespace mcslam::apps

@@ -1,0 +1,97 @@
+#include "geometry/bundle_adjust.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+#include <fmt/format.h>
+
+namespace mcslam::geometry {
+
+void BundleAdjustOptions::Check() const {
+  if (!(focal_px > 0)) throw std::invalid_argument(fmt::format("bundle adjustment: focal_px must be > 0, got {}", focal_px));
+  if (!(huber_px > 0)) throw std::invalid_argument(fmt::format("bundle adjustment: huber_px must be > 0, got {}", huber_px));
+  if (max_iterations < 1)
+    throw std::invalid_argument(fmt::format("bundle adjustment: max_iterations must be >= 1, got {}", max_iterations));
+  if (num_threads < 1) throw std::invalid_argument(fmt::format("bundle adjustment: num_threads must be >= 1, got {}", num_threads));
+}
+
+namespace {
+
+// Reprojection residual in pixels; the quaternion is stored (x, y, z, w) as Eigen does.
+struct ReprojectionError {
+  ReprojectionError(const Eigen::Vector2d& uv, double focal) : u(uv.x()), v(uv.y()), f(focal) {}
+  template <typename T>
+  bool operator()(const T* q_xyzw, const T* t, const T* X, T* r) const {
+    const T q_wxyz[4] = {q_xyzw[3], q_xyzw[0], q_xyzw[1], q_xyzw[2]};
+    T p[3];
+    ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
+    p[0] += t[0], p[1] += t[1], p[2] += t[2];
+    r[0] = T(f) * (p[0] / p[2] - T(u));
+    r[1] = T(f) * (p[1] / p[2] - T(v));
+    return true;
+  }
+  double u, v, f;
+};
+
+double RmsPx(const std::vector<Pose>& cams, const std::vector<Eigen::Vector3d>& pts,
+             const std::vector<BundleObservation>& obs, double focal) {
+  double s = 0;
+  for (const BundleObservation& o : obs) {
+    const Eigen::Vector3d p = cams[o.camera] * pts[o.point];
+    s += (focal * (p.head<2>() / p.z() - o.uv_norm)).squaredNorm();
+  }
+  return obs.empty() ? 0.0 : std::sqrt(s / obs.size());
+}
+
+}  // namespace
+
+BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vector3d>& pts,
+                                 const std::vector<BundleObservation>& obs, const std::vector<bool>& fixed,
+                                 const BundleAdjustOptions& options) {
+  options.Check();
+  if (fixed.size() != cams.size()) throw std::invalid_argument("bundle adjustment: one fixed flag per camera is needed");
+  BundleAdjustSummary out;
+  out.initial_rms_px = RmsPx(cams, pts, obs, options.focal_px);
+  std::vector<std::array<double, 4>> q(cams.size());
+  std::vector<std::array<double, 3>> t(cams.size());
+  for (size_t i = 0; i < cams.size(); ++i) {
+    const Eigen::Quaterniond qi = cams[i].q.normalized();
+    q[i] = {qi.x(), qi.y(), qi.z(), qi.w()};
+    t[i] = {cams[i].t.x(), cams[i].t.y(), cams[i].t.z()};
+  }
+  ceres::Problem problem;
+  for (const BundleObservation& o : obs) {
+    if (o.camera < 0 || o.camera >= static_cast<int>(cams.size()) || o.point < 0 || o.point >= static_cast<int>(pts.size()))
+      throw std::invalid_argument("bundle adjustment: observation index out of range");
+    auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 4, 3, 3>(
+        new ReprojectionError(o.uv_norm, options.focal_px));
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(options.huber_px), q[o.camera].data(), t[o.camera].data(),
+                             pts[o.point].data());
+  }
+  for (size_t i = 0; i < cams.size(); ++i) {
+    if (!problem.HasParameterBlock(q[i].data())) continue;
+    problem.SetManifold(q[i].data(), new ceres::EigenQuaternionManifold());
+    if (fixed[i]) {
+      problem.SetParameterBlockConstant(q[i].data());
+      problem.SetParameterBlockConstant(t[i].data());
+    }
+  }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_SCHUR;
+  so.max_num_iterations = options.max_iterations;
+  so.num_threads = options.num_threads;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  for (size_t i = 0; i < cams.size(); ++i)
+    cams[i] = Pose(Eigen::Quaterniond(q[i][3], q[i][0], q[i][1], q[i][2]), Eigen::Vector3d(t[i][0], t[i][1], t[i][2]));
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  out.iterations = static_cast<int>(summary.iterations.size());
+  out.final_rms_px = RmsPx(cams, pts, obs, options.focal_px);
+  out.report = summary.BriefReport();
+  return out;
+}
+
+}  // namespace mcslam::geometry

@@ -1,0 +1,41 @@
+#pragma once
+// Bundle adjustment (Levenberg-Marquardt, Ceres, Huber loss) of camera poses and points from normalised
+// observations. mcslam's estimators are Monte Carlo; this is used where the problem is small and
+// ill-conditioned for pairwise geometry: refining the whole initialisation window (many views constrain
+// the bas-relief direction that two views leave nearly free), and as the baseline the paper compares with.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/pose.h"
+
+namespace mcslam::geometry {
+
+struct BundleObservation {
+  int camera = 0;                                  // index into cam_from_world
+  int point = 0;                                   // index into points_in_world
+  Eigen::Vector2d uv_norm = Eigen::Vector2d::Zero();  // undistorted, normalised
+};
+
+struct BundleAdjustOptions {
+  double focal_px = 500;         // residuals are in pixels: normalised error times this
+  double huber_px = 2.0;         // robust loss scale
+  int max_iterations = 50;
+  int num_threads = 1;
+  void Check() const;            // throws std::invalid_argument naming the bad field
+};
+
+struct BundleAdjustSummary {
+  bool converged = false;
+  int iterations = 0;
+  double initial_rms_px = 0, final_rms_px = 0;  // over all observations
+  std::string report;                           // Ceres' brief report
+};
+
+// Adjusts cam_from_world (except those with fixed[i] = true) and points_in_world in place.
+BundleAdjustSummary BundleAdjust(std::vector<Pose>& cam_from_world, std::vector<Eigen::Vector3d>& points_in_world,
+                                 const std::vector<BundleObservation>& observations, const std::vector<bool>& fixed,
+                                 const BundleAdjustOptions& options);
+
+}  // namespace mcslam::geometry

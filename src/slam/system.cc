@@ -1,0 +1,593 @@
+#include "slam/system.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <unordered_map>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+
+#include "geometry/bundle_adjust.h"
+#include "geometry/pnp.h"
+#include "geometry/triangulation.h"
+#include "slam/fibonacci.h"
+
+namespace mcslam::slam {
+
+namespace {
+
+double Ms(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const size_t m = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + m, v.end());
+  return v[m];
+}
+
+void Fail(const std::string& what) { throw std::invalid_argument(what); }
+
+}  // namespace
+
+const char* ToString(FrameStatus s) {
+  switch (s) {
+    case FrameStatus::kWaitingForInit: return "waiting";
+    case FrameStatus::kTracked: return "tracked";
+    case FrameStatus::kLost: return "lost";
+  }
+  return "?";
+}
+
+void InitOptions::Check() const {
+  if (!(min_median_displacement_px > 0)) Fail(fmt::format("init: min_median_displacement_px must be > 0, got {}", min_median_displacement_px));
+  if (min_common_features < 8) Fail(fmt::format("init: min_common_features must be >= 8, got {}", min_common_features));
+  if (min_inliers < 8) Fail(fmt::format("init: min_inliers must be >= 8, got {}", min_inliers));
+  if (min_points < 3) Fail(fmt::format("init: min_points must be >= 3, got {}", min_points));
+  if (!(min_median_parallax_deg >= 0)) Fail(fmt::format("init: min_median_parallax_deg must be >= 0, got {}", min_median_parallax_deg));
+  if (!(ransac_threshold_px > 0)) Fail(fmt::format("init: ransac_threshold_px must be > 0, got {}", ransac_threshold_px));
+}
+
+void MappingOptions::Check() const {
+  if (retriangulate_after_frames < 1)
+    Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
+  if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));
+  if (!(min_parallax_deg >= 0)) Fail(fmt::format("mapping: min_parallax_deg must be >= 0, got {}", min_parallax_deg));
+  if (!(max_reprojection_px > 0)) Fail(fmt::format("mapping: max_reprojection_px must be > 0, got {}", max_reprojection_px));
+  if (!(adjust_threshold_px > 0)) Fail(fmt::format("mapping: adjust_threshold_px must be > 0, got {}", adjust_threshold_px));
+  if (!(candidate_threshold_px >= 0))
+    Fail(fmt::format("mapping: candidate_threshold_px must be >= 0, got {}", candidate_threshold_px));
+  if (samples < 1) Fail(fmt::format("mapping: samples must be >= 1, got {}", samples));
+  if (window < 2) Fail(fmt::format("mapping: window must be >= 2 keyframes, got {}", window));
+  if (!(sigma_scale >= 0)) Fail(fmt::format("mapping: sigma_scale must be >= 0, got {}", sigma_scale));
+  if (!(sigma_floor_rel_depth > 0)) Fail(fmt::format("mapping: sigma_floor_rel_depth must be > 0, got {}", sigma_floor_rel_depth));
+  if (!(max_distance_px > 0)) Fail(fmt::format("mapping: max_distance_px must be > 0, got {}", max_distance_px));
+}
+
+void SystemOptions::Check() const {
+  tracker.Check();
+  init.Check();
+  mapping.Check();
+  smoother.Check();
+  if (!(sigma_trans_floor_rel_depth > 0))
+    Fail(fmt::format("sigma_trans_floor_rel_depth must be > 0, got {}", sigma_trans_floor_rel_depth));
+}
+
+System::System(const PinholeCamera& camera, const SystemOptions& options,
+               std::unique_ptr<compute::PoseKernel> pose_kernel, std::unique_ptr<compute::PointKernel> point_kernel)
+    : camera_(camera),
+      ideal_(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
+      options_(options),
+      pose_kernel_(std::move(pose_kernel)),
+      point_kernel_(std::move(point_kernel)),
+      smoother_(options.smoother) {
+  camera_.Check();
+  options_.Check();
+  if (!pose_kernel_ || !point_kernel_) throw std::invalid_argument("system: compute kernels missing");
+  point_normals_ = compute::NormalTable(options_.mapping.samples, options_.seed, /*stream=*/2);
+}
+
+std::vector<FrameReport> System::Process(const FrameObservations& frame) {
+  FrameRecord rec;
+  rec.index = frame.index;
+  rec.stamp_s = frame.stamp_s;
+  rec.features.reserve(frame.features.size());
+  for (const FeatureObservation& f : frame.features) {
+    if (!f.uv_px.allFinite()) continue;
+    const Eigen::Vector2d uv = camera_.UndistortPixel(f.uv_px);
+    if (uv.allFinite()) rec.features.push_back({f.feature_id, uv});
+  }
+  std::sort(rec.features.begin(), rec.features.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+  rec.features.erase(std::unique(rec.features.begin(), rec.features.end(),
+                                 [](const auto& a, const auto& b) { return a.id == b.id; }),
+                     rec.features.end());
+  map_.frames.push_back(std::move(rec));
+  const int slot = static_cast<int>(map_.frames.size()) - 1;
+
+  std::vector<FrameReport> out;
+  if (!initialised_) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (TryInitialise(&out)) return out;
+    FrameReport r;
+    r.index = frame.index;
+    r.stamp_s = frame.stamp_s;
+    r.status = FrameStatus::kWaitingForInit;
+    r.init_ms = Ms(t0);
+    r.note = out.empty() ? "waiting for enough motion to initialise" : out.front().note;
+    out.assign(1, r);
+    return out;
+  }
+  out.push_back(TrackFrame(slot));
+  return out;
+}
+
+bool System::TryInitialise(std::vector<FrameReport>* out) {
+  const InitOptions& io = options_.init;
+  const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
+  auto note = [&](std::string s) {
+    FrameReport r;
+    r.note = std::move(s);
+    out->assign(1, r);
+    return false;
+  };
+  if (reference_slot_ < 0) {
+    reference_slot_ = cur_slot;
+    return note("reference frame for initialisation");
+  }
+  const FrameRecord& ref = map_.frames[reference_slot_];
+  const FrameRecord& cur = map_.frames[cur_slot];
+  std::vector<Eigen::Vector2d> n1, n2;
+  std::vector<int64_t> ids;
+  std::vector<double> disp;
+  for (const FeatureUndistorted& f : cur.features) {
+    const FeatureUndistorted* g = ref.Find(f.id);
+    if (!g) continue;
+    n1.push_back(ideal_.PixelToNormalized(g->uv_px));
+    n2.push_back(ideal_.PixelToNormalized(f.uv_px));
+    ids.push_back(f.id);
+    disp.push_back((f.uv_px - g->uv_px).norm());
+  }
+  if (static_cast<int>(ids.size()) < io.min_common_features) {
+    reference_slot_ = cur_slot;
+    return note(fmt::format("only {} features shared with the reference: new reference", ids.size()));
+  }
+  const double med_disp = Median(disp);
+  if (med_disp < io.min_median_displacement_px)
+    return note(fmt::format("median displacement {:.1f} px < {:.1f} px", med_disp, io.min_median_displacement_px));
+
+  // Several two-view hypotheses (the 8-point method with two RANSAC seeds, OpenCV's 5-point method). Each
+  // places every frame of the window by PnP against its points and is refined by one bundle adjustment over
+  // the whole window; the one that explains the window best (median reprojection error) is kept. With a
+  // narrow field of view two views leave a near-free bas-relief direction and sometimes a twisted pair;
+  // a wrong basin cannot explain tens of views as well as the right one.
+  struct Hypothesis {
+    std::vector<Pose> poses;  // per window slot
+    std::vector<Eigen::Vector3d> points;
+    std::vector<int64_t> point_ids;
+    double median_px = std::numeric_limits<double>::infinity();
+    geometry::TwoViewResult two_view;
+  };
+  std::vector<int> window;
+  for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
+  const double focal = 0.5 * (camera_.fx + camera_.fy);
+  std::optional<Hypothesis> best;
+  std::string last_failure;
+  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
+                                                                   {io.method, options_.seed + 1},
+                                                                   {geometry::EssentialMethod::kFivePointOpenCV, 0},
+                                                                   {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
+  for (const auto& [method, seed] : tries) {
+    geometry::TwoViewOptions tv;
+    tv.method = method;
+    tv.ransac_threshold_px = io.ransac_threshold_px;
+    tv.focal_px = focal;
+    tv.seed = seed;
+    tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+    geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
+    if (!tvr.ok) {
+      last_failure = "two-view geometry failed: " + tvr.failure;
+      continue;
+    }
+    if (tvr.num_inliers < io.min_inliers || tvr.num_triangulated < io.min_points ||
+        tvr.median_parallax_deg < io.min_median_parallax_deg) {
+      last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
+                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, io.min_inliers,
+                                 io.min_points, io.min_median_parallax_deg);
+      continue;
+    }
+    Hypothesis h;
+    std::unordered_map<int64_t, int> index;
+    for (size_t i = 0; i < ids.size(); ++i)
+      if (tvr.triangulated[i]) index[ids[i]] = static_cast<int>(h.points.size()), h.points.push_back(tvr.points_in_cam1[i]), h.point_ids.push_back(ids[i]);
+    h.poses.assign(window.size(), Pose());
+    h.poses.back() = tvr.cam2_from_cam1;
+    std::vector<bool> fixed(window.size(), false);
+    fixed.front() = true;
+    geometry::PnpOptions po;
+    po.focal_px = focal;
+    po.threshold_px = options_.mapping.max_reprojection_px;
+    std::vector<geometry::BundleObservation> obs;
+    for (size_t w = 0; w < window.size(); ++w) {
+      std::vector<Eigen::Vector3d> P;
+      std::vector<Eigen::Vector2d> uv;
+      for (const FeatureUndistorted& f : map_.frames[window[w]].features)
+        if (auto it = index.find(f.id); it != index.end()) {
+          const Eigen::Vector2d n = ideal_.PixelToNormalized(f.uv_px);
+          obs.push_back({static_cast<int>(w), it->second, n});
+          P.push_back(h.points[it->second]);
+          uv.push_back(n);
+        }
+      if (w == 0 || w + 1 == window.size()) continue;
+      const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+      h.poses[w] = pose ? *pose : h.poses[w - 1];
+    }
+    geometry::BundleAdjustOptions bo;
+    bo.focal_px = focal;
+    bo.huber_px = io.refine_huber_px;
+    if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
+    std::vector<double> res;
+    for (const geometry::BundleObservation& o : obs) {
+      const Eigen::Vector3d p = h.poses[o.camera] * h.points[o.point];
+      res.push_back(p.z() > 0 ? focal * (p.head<2>() / p.z() - o.uv_norm).norm() : 1e9);
+    }
+    h.median_px = Median(res);
+    // The refined window must still have the parallax asked for (between the first and the last camera).
+    std::vector<double> parallax;
+    const Eigen::Vector3d c0 = h.poses.front().OriginOfTargetInSource(), c1 = h.poses.back().OriginOfTargetInSource();
+    for (const Eigen::Vector3d& X : h.points) {
+      const Eigen::Vector3d a = (X - c0).normalized(), b = (X - c1).normalized();
+      parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
+    }
+    const double refined_parallax = Median(parallax);
+    if (refined_parallax < io.min_median_parallax_deg) {
+      last_failure = fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg", refined_parallax,
+                                 io.min_median_parallax_deg);
+      continue;
+    }
+    h.two_view = std::move(tvr);
+    if (!best || h.median_px < best->median_px) best = std::move(h);
+  }
+  if (!best) return note(last_failure);
+
+  // Gauge: the reference camera is the world; the first baseline has length 1, or the true length when
+  // the ground truth is offered (--gt-scale, as the paper sets the scale by hand for its precision test).
+  double baseline = 1.0;
+  if (oracle_) {
+    const std::optional<double> d = oracle_(ref.stamp_s, cur.stamp_s);
+    if (d && std::isfinite(*d) && *d > 0) baseline = *d;
+  }
+  const double b = (best->poses.back().OriginOfTargetInSource() - best->poses.front().OriginOfTargetInSource()).norm();
+  const double s = b > 1e-12 ? baseline / b : 1.0;
+  std::vector<double> depths;
+  for (size_t i = 0; i < best->points.size(); ++i) {
+    MapPoint p;
+    p.id = best->point_ids[i];
+    p.position_in_world = best->points[i] * s;
+    p.created_frame = cur.index;
+    p.last_seen_frame = cur.index;
+    map_.Add(p);
+    depths.push_back(p.position_in_world.z());
+  }
+  for (size_t w = 0; w < window.size(); ++w) {
+    FrameRecord& f = map_.frames[window[w]];
+    f.has_pose = true;
+    f.cam_from_world = best->poses[w];
+    f.cam_from_world.t *= s;
+    f.keyframe = true;
+    map_.keyframes.push_back(window[w]);
+  }
+  last_posed_slot_ = cur_slot;
+  MarkSeen(cur_slot);
+  for (const FeatureUndistorted& f : cur.features)
+    if (MapPoint* p = map_.Find(f.id)) {
+      Eigen::Vector2d uv;
+      p->inlier = ideal_.ProjectWorld(map_.frames[cur_slot].cam_from_world, p->position_in_world, &uv) &&
+                  (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
+    }
+  PoseTrackerOptions topts = options_.tracker;
+  topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * Median(depths);
+  tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
+  initialised_ = true;
+
+  out->clear();
+  smoother_.Reset();
+  for (size_t w = 0; w < window.size(); ++w) {
+    const FrameRecord& f = map_.frames[window[w]];
+    FrameReport r;
+    r.index = f.index;
+    r.stamp_s = f.stamp_s;
+    r.status = FrameStatus::kTracked;
+    r.has_pose = true;
+    r.keyframe = true;
+    r.initialisation = true;
+    r.cam_from_world = f.cam_from_world;
+    r.smoothed_cam_from_world = smoother_.Update(f.cam_from_world);
+    ResidualStats(window[w], &r);
+    if (w + 1 == window.size()) {
+      r.new_points = static_cast<int>(depths.size());
+      r.note = fmt::format(
+          "initialised from frames {} and {}: {} inliers, {} points, median parallax {:.2f} deg, window of {} frames "
+          "refined to a median reprojection error of {:.2f} px",
+          ref.index, cur.index, best->two_view.num_inliers, depths.size(), best->two_view.median_parallax_deg,
+          window.size(), best->median_px);
+    }
+    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    out->push_back(r);
+  }
+  return true;
+}
+
+FrameReport System::TrackFrame(int slot) {
+  FrameReport r;
+  FrameRecord& fr = map_.frames[slot];
+  r.index = fr.index;
+  r.stamp_s = fr.stamp_s;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<PointObservation> obs;
+  std::vector<MapPoint*> pts;
+  obs.reserve(fr.features.size());
+  for (const FeatureUndistorted& f : fr.features) {
+    MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved) continue;
+    obs.push_back({p->position_in_world, f.uv_px, p->inlier});
+    pts.push_back(p);
+  }
+  std::vector<double> res;
+  std::vector<uint8_t> inl;
+  const Pose prev = map_.frames[last_posed_slot_].cam_from_world;
+  const PoseEstimate est = tracker_->Track(prev, obs, static_cast<uint64_t>(fr.index), &res, &inl);
+  r.track_ms = Ms(t0);
+  r.scored = est.scored;
+  r.inliers = est.inliers;
+  if (!est.tracked) {
+    r.status = FrameStatus::kLost;
+    r.note = est.lost_reason;
+    for (MapPoint* p : pts) p->inlier = true;  // everyone gets another chance in the next frame
+    MarkSeen(slot);
+    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    return r;
+  }
+  for (size_t i = 0; i < pts.size(); ++i) pts[i]->inlier = inl[i] != 0;
+  fr.has_pose = true;
+  fr.cam_from_world = est.cam_from_world;
+  last_posed_slot_ = slot;
+  r.status = FrameStatus::kTracked;
+  r.has_pose = true;
+  r.cam_from_world = est.cam_from_world;
+  r.smoothed_cam_from_world = smoother_.Update(est.cam_from_world);
+  if (est.keyframe) {
+    fr.keyframe = true;
+    map_.keyframes.push_back(slot);
+    r.keyframe = true;
+    const auto t1 = std::chrono::steady_clock::now();
+    r.new_points = TriangulateNewPoints(slot);
+    r.map_ms = Ms(t1);
+    if (options_.mapping.adjust) {
+      const auto t2 = std::chrono::steady_clock::now();
+      AdjustPoints(slot, &r);
+      r.adjust_ms = Ms(t2);
+    }
+  }
+  MarkSeen(slot);
+  ResidualStats(slot, &r);
+  r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+  return r;
+}
+
+void System::MarkSeen(int slot) {
+  const FrameRecord& fr = map_.frames[slot];
+  for (const FeatureUndistorted& f : fr.features)
+    if (MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) {
+      p->last_seen_frame = fr.index;
+      p->state = PointState::kActive;
+    }
+  for (MapPoint& p : map_.points())
+    if (p.state == PointState::kActive && p.last_seen_frame < fr.index) p.state = PointState::kLost;
+}
+
+int System::TriangulateNewPoints(int slot) {
+  const MappingOptions& mo = options_.mapping;
+  const FrameRecord& cur = map_.frames[slot];
+  geometry::TriangulationOptions to;
+  to.max_reprojection_px = mo.max_reprojection_px;
+  to.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  to.min_parallax_deg = mo.min_parallax_deg;
+  int added = 0;
+  for (const FeatureUndistorted& f : cur.features) {
+    MapPoint* existing = map_.Find(f.id);
+    if (existing && (existing->state != PointState::kRemoved ||
+                     cur.index - existing->removed_frame < mo.retriangulate_after_frames))
+      continue;
+    // Posed keyframes where this feature was seen, oldest first (the track's history).
+    std::vector<int> seen;
+    for (int k : map_.keyframes)
+      if (map_.frames[k].has_pose && map_.frames[k].Find(f.id)) seen.push_back(k);
+    if (static_cast<int>(seen.size()) < mo.min_track_frames) continue;
+    // Robust linear triangulation: a point from each of a few view pairs (first-current, and pairs that
+    // skip the first or the current view in case a wrong match sits there), the views that agree with it
+    // within the reprojection threshold counted, and the best pair's agreeing views triangulated together.
+    // A wrong match or one noisy view then costs a view, not the point.
+    const int n = static_cast<int>(seen.size());
+    const int first = 0, last = n - 1, mid = n / 2;
+    const int pairs[4][2] = {{first, last}, {std::min(1, last), last}, {first, std::max(last - 1, 0)}, {first, mid}};
+    geometry::TriangulationOptions pair_opts = to;
+    std::vector<int> best_views;
+    for (const auto& pr : pairs) {
+      if (pr[0] >= pr[1]) continue;
+      const Pose poses2[2] = {map_.frames[seen[pr[0]]].cam_from_world, map_.frames[seen[pr[1]]].cam_from_world};
+      const Eigen::Vector2d uv2[2] = {ideal_.PixelToNormalized(map_.frames[seen[pr[0]]].Find(f.id)->uv_px),
+                                      ideal_.PixelToNormalized(map_.frames[seen[pr[1]]].Find(f.id)->uv_px)};
+      const geometry::Triangulation t2 = geometry::TriangulateDlt(poses2, uv2, pair_opts);
+      if (!t2.ok) continue;
+      std::vector<int> agree;
+      for (int k : seen) {
+        Eigen::Vector2d uv;
+        if (ideal_.ProjectWorld(map_.frames[k].cam_from_world, t2.point_in_world, &uv) &&
+            (uv - map_.frames[k].Find(f.id)->uv_px).norm() <= mo.max_reprojection_px)
+          agree.push_back(k);
+      }
+      if (agree.size() > best_views.size()) best_views = agree;
+    }
+    if (static_cast<int>(best_views.size()) < mo.min_track_frames) continue;
+    std::vector<Pose> poses;
+    std::vector<Eigen::Vector2d> uv;
+    for (int k : best_views) {
+      poses.push_back(map_.frames[k].cam_from_world);
+      uv.push_back(ideal_.PixelToNormalized(map_.frames[k].Find(f.id)->uv_px));
+    }
+    const geometry::Triangulation t = geometry::TriangulateDlt(poses, uv, to);
+    if (!t.ok) continue;
+    MapPoint p;
+    p.id = f.id;
+    p.position_in_world = t.point_in_world;
+    p.created_frame = cur.index;
+    p.last_seen_frame = cur.index;
+    if (existing)
+      *existing = p;
+    else
+      map_.Add(p);
+    ++added;
+  }
+  return added;
+}
+
+void System::AdjustPoints(int slot, FrameReport* r) {
+  const MappingOptions& mo = options_.mapping;
+  const FrameRecord& cur = map_.frames[slot];
+  const std::vector<int> window_idx = FibonacciWindow(static_cast<int>(map_.keyframes.size()), mo.window);
+  std::vector<int> window;  // frame slots
+  std::vector<compute::ScaledPose> poses;
+  for (int wi : window_idx) {
+    const FrameRecord& k = map_.frames[map_.keyframes[wi]];
+    if (!k.has_pose) continue;
+    window.push_back(map_.keyframes[wi]);
+    const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
+    const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
+    const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};
+    poses.push_back(compute::MakeScaledPose(qf, tf, float(camera_.fx), float(camera_.fy)));
+  }
+  if (window.size() < 2) return;
+
+  // The residual of a point (Algorithm 2) is read robustly: the median of its reprojection distances over
+  // the window's keyframes, so that one wrong match (a feature on the wrong spot in one frame) neither makes
+  // a good point a candidate nor condemns it.
+  auto median_residual = [&](const std::vector<std::pair<int, Eigen::Vector2d>>& views, const Eigen::Vector3d& X) {
+    std::vector<double> d;
+    for (const auto& [w, uv_obs] : views) {
+      Eigen::Vector2d uv;
+      d.push_back(ideal_.ProjectWorld(map_.frames[window[w]].cam_from_world, X, &uv) ? (uv - uv_obs).norm() : 1e9);
+    }
+    return Median(d);
+  };
+
+  // Candidates: points seen in this keyframe whose residual is above the threshold.
+  std::vector<MapPoint*> cand;
+  std::vector<double> before_residual;
+  std::vector<std::vector<std::pair<int, Eigen::Vector2d>>> cand_views;
+  std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
+  std::vector<int> obs_begin{0}, obs_pose;
+  std::vector<std::pair<int, Eigen::Vector2d>> views;
+  for (const FeatureUndistorted& f : cur.features) {
+    MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved) continue;
+    views.clear();
+    for (size_t w = 0; w < window.size(); ++w)
+      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) views.emplace_back(static_cast<int>(w), o->uv_px);
+    // Fewer than 3 views: one view cannot tell a point from its ray, and the median of two residuals is not
+    // robust to one wrong match, so no verdict is passed on this point yet.
+    if (views.size() < 3) continue;
+    const double before = median_residual(views, p->position_in_world);
+    if (before <= mo.candidate_threshold_px) continue;
+    // Eqs. 8-9: the point displacement dz that the linearised projection model says would move its
+    // projections onto the features, stacked over the window's views (Huber-weighted, so that a wrong
+    // match does not drive it): unlike one view, several see the point's depth error too. The spread is
+    // |dz| per axis plus a floor.
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (const auto& [w, uv_obs] : views) {
+      Eigen::Vector2d uv;
+      Eigen::Matrix<double, 2, 3> J;
+      if (!ideal_.ProjectWorld(map_.frames[window[w]].cam_from_world, p->position_in_world, &uv, &J)) continue;
+      const Eigen::Vector2d res = uv_obs - uv;
+      const double e = res.norm(), k = 2.0 * mo.adjust_threshold_px;
+      const double wgt = e <= k ? 1.0 : k / e;
+      A += wgt * J.transpose() * J;
+      b += wgt * J.transpose() * res;
+    }
+    A += 1e-6 * A.trace() * Eigen::Matrix3d::Identity();  // a ridge: a short baseline leaves depth nearly free
+    Eigen::Vector3d dz = A.ldlt().solve(b);
+    if (!dz.allFinite()) dz.setZero();
+    const double depth = (cur.cam_from_world * p->position_in_world).z();
+    const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
+    for (const auto& [w, uv_obs] : views) {
+      obs_pose.push_back(w);
+      ou.push_back(float(uv_obs.x() - camera_.cx));
+      ov.push_back(float(uv_obs.y() - camera_.cy));
+    }
+    cand.push_back(p);
+    before_residual.push_back(before);
+    cand_views.push_back(views);
+    cx.push_back(float(p->position_in_world.x())), cy.push_back(float(p->position_in_world.y()));
+    cz.push_back(float(p->position_in_world.z()));
+    sx.push_back(float(sigma.x())), sy.push_back(float(sigma.y())), sz.push_back(float(sigma.z()));
+    obs_begin.push_back(static_cast<int>(obs_pose.size()));
+  }
+  if (cand.empty()) return;
+
+  compute::PointAdjustProblem pr;
+  pr.poses = poses.data();
+  pr.num_poses = static_cast<int>(poses.size());
+  pr.cx = cx.data(), pr.cy = cy.data(), pr.cz = cz.data();
+  pr.sx = sx.data(), pr.sy = sy.data(), pr.sz = sz.data();
+  pr.obs_begin = obs_begin.data();
+  pr.num_points = static_cast<int>(cand.size());
+  pr.obs_pose = obs_pose.data();
+  pr.obs_u = ou.data(), pr.obs_v = ov.data();
+  pr.params.fx = float(camera_.fx), pr.params.fy = float(camera_.fy);
+  pr.params.max_distance_px = float(mo.max_distance_px);
+  std::vector<compute::PointBest> best(cand.size());
+  point_kernel_->Score(pr, point_normals_, mo.samples, best.data());
+
+  // The best sample replaces the point when its residual is lower than before and under the threshold;
+  // otherwise the point is an outlier and leaves the map.
+  for (size_t p = 0; p < cand.size(); ++p) {
+    const Eigen::Vector3d X(best[p].position[0], best[p].position[1], best[p].position[2]);
+    const double after = best[p].index >= 0 ? median_residual(cand_views[p], X) : before_residual[p];
+    if (after < before_residual[p] && after < mo.adjust_threshold_px) {
+      cand[p]->position_in_world = X;
+      ++cand[p]->adjustments;
+      ++r->adjusted;
+    } else if (before_residual[p] < mo.adjust_threshold_px) {
+      // A candidate below the outlier threshold that no sample improves stays as it is.
+    } else {
+      cand[p]->state = PointState::kRemoved;
+      cand[p]->removed_frame = cur.index;
+      ++r->removed;
+    }
+  }
+}
+
+void System::ResidualStats(int slot, FrameReport* r) const {
+  const FrameRecord& fr = map_.frames[slot];
+  if (!fr.has_pose) return;
+  std::vector<double> all;
+  double sum = 0;
+  int n = 0;
+  for (const FeatureUndistorted& f : fr.features) {
+    const MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved) continue;
+    Eigen::Vector2d uv;
+    if (!ideal_.ProjectWorld(fr.cam_from_world, p->position_in_world, &uv)) continue;
+    const double d = (uv - f.uv_px).norm();
+    all.push_back(d);
+    if (d < options_.tracker.inlier_threshold_px) sum += d, ++n;
+  }
+  r->reproj_mean_px = n > 0 ? sum / n : 0.0;
+  r->reproj_median_px = Median(all);
+}
+
+}  // namespace mcslam::slam

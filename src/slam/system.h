@@ -1,0 +1,139 @@
+#pragma once
+// The SLAM back end (paper §5-6): from feature observations alone, it initialises from two views (§6.1),
+// tracks every frame by Monte Carlo pose estimation (§5), and on keyframes adds points by linear
+// triangulation and refines points by Monte Carlo adjustment over Fibonacci-spaced keyframes (§6.2-6.3).
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "compute/point_kernel.h"
+#include "compute/pose_kernel.h"
+#include "core/camera.h"
+#include "geometry/two_view.h"
+#include "slam/map.h"
+#include "slam/pose_smoother.h"
+#include "slam/pose_tracker.h"
+#include "slam/types.h"
+
+namespace mcslam::slam {
+
+struct InitOptions {
+  double min_median_displacement_px = 20.0;  // start trying once the features moved this much (median)
+  int min_common_features = 40;              // fewer shared with the reference: the reference moves on
+  int min_inliers = 40;                      // epipolar inliers needed
+  int min_points = 30;                       // triangulated points needed
+  // Median parallax of those points, before and after the window's refinement: under ~3 degrees and σ = 1 px a
+  // near pure-rotation solution explains the views about as well as the true one.
+  double min_median_parallax_deg = 3.0;
+  geometry::EssentialMethod method = geometry::EssentialMethod::kEightPoint;
+  double ransac_threshold_px = 1.5;
+  // Every frame from the reference to the initialising one is placed by PnP against the two-view points and
+  // the whole window refined by one bundle adjustment (Levenberg-Marquardt, Huber), for each two-view
+  // hypothesis; the hypothesis that explains the window best is kept. Two views of a narrow field of view
+  // leave the bas-relief direction nearly free; the window pins it down.
+  bool refine_window = true;
+  double refine_huber_px = 2.0;
+  void Check() const;
+};
+
+struct MappingOptions {
+  // New points (linear triangulation between posed frames).
+  int min_track_frames = 3;                  // posed frames a feature must be seen in
+  double min_parallax_deg = 2.0;
+  double max_reprojection_px = 3.0;
+  // A point removed as an outlier may be triangulated again from its track this many frames later (its
+  // first triangulation is often what was wrong: low parallax early in the track).
+  int retriangulate_after_frames = 10;
+  // Monte Carlo point adjustment (Algorithm 2).
+  bool adjust = true;
+  double adjust_threshold_px = 2.5;          // a point whose residual stays above this is an outlier (Algorithm 2)
+  // Points with a residual above this are re-sampled (Algorithm 2 uses adjust_threshold_px for both). Lower
+  // values also refine points that are still inside the outlier threshold but biased (a depth error that
+  // a short window cannot show yet); the best sample replaces such a point only when it lowers the residual.
+  double candidate_threshold_px = 2.5;
+  int samples = 4096;                        // per point
+  int window = 12;                           // keyframes (current and current - Fib(n))
+  double sigma_scale = 1.0;                  // Sigma_j = diag(scale * |dz| + floor), dz from Eqs. 8-9
+  double sigma_floor_rel_depth = 0.01;       // floor, as a fraction of the point's depth
+  double max_distance_px = 20.0;             // cap of one observation's contribution to a sample's score
+  void Check() const;
+};
+
+struct SystemOptions {
+  PoseTrackerOptions tracker;
+  InitOptions init;
+  MappingOptions mapping;
+  PoseSmootherOptions smoother;
+  // The tracker's translation-spread floor, as a fraction of the median scene depth at initialisation
+  // (the map's scale is arbitrary, so an absolute floor would mean nothing).
+  double sigma_trans_floor_rel_depth = 0.0007;
+  uint64_t seed = 1;
+  void Check() const;
+};
+
+enum class FrameStatus { kWaitingForInit, kTracked, kLost };
+const char* ToString(FrameStatus s);
+
+struct FrameReport {
+  int64_t index = 0;
+  double stamp_s = 0;
+  FrameStatus status = FrameStatus::kWaitingForInit;
+  bool has_pose = false;
+  Pose cam_from_world;
+  Pose smoothed_cam_from_world;
+  bool keyframe = false;
+  bool initialisation = false;  // the pose came from the two-view initialisation
+  int scored = 0, inliers = 0;
+  int map_points = 0;           // active + lost
+  int new_points = 0, adjusted = 0, removed = 0;
+  double reproj_mean_px = 0;    // mean residual of the inlier observations of map points in this frame
+  double reproj_median_px = 0;  // median residual of all observations of map points in this frame
+  double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
+  std::string note;             // why lost / waiting
+};
+
+class System {
+ public:
+  System(const PinholeCamera& camera, const SystemOptions& options, std::unique_ptr<compute::PoseKernel> pose_kernel,
+         std::unique_ptr<compute::PointKernel> point_kernel);
+
+  // Processes the next frame. Returns the reports of the frames that became final: normally this frame;
+  // when the map is initialised, also the frames from the reference frame on (their reports replace the
+  // earlier 'waiting' ones).
+  std::vector<FrameReport> Process(const FrameObservations& frame);
+
+  // For --gt-scale: the true distance between the camera centres at two stamps, when known. The first
+  // baseline is then scaled to it instead of to 1.
+  void SetBaselineOracle(std::function<std::optional<double>(double, double)> oracle) { oracle_ = std::move(oracle); }
+
+  bool initialised() const { return initialised_; }
+  const Map& map() const { return map_; }
+  const PinholeCamera& camera() const { return camera_; }
+
+ private:
+  bool TryInitialise(std::vector<FrameReport>* out);
+  FrameReport TrackFrame(int slot);
+  int TriangulateNewPoints(int slot);
+  void AdjustPoints(int slot, FrameReport* r);
+  void ResidualStats(int slot, FrameReport* r) const;
+  void MarkSeen(int slot);
+
+  PinholeCamera camera_;
+  PinholeCamera ideal_;  // same intrinsics, no distortion: observations are undistorted on arrival
+  SystemOptions options_;
+  std::unique_ptr<compute::PoseKernel> pose_kernel_;
+  std::unique_ptr<compute::PointKernel> point_kernel_;
+  std::unique_ptr<PoseTracker> tracker_;  // made at initialisation, when the map's scale is known
+  compute::NormalTable point_normals_;
+  PoseSmoother smoother_;
+  std::function<std::optional<double>(double, double)> oracle_;
+
+  Map map_;
+  bool initialised_ = false;
+  int reference_slot_ = -1;
+  int last_posed_slot_ = -1;
+};
+
+}  // namespace mcslam::slam
