@@ -1,6 +1,7 @@
 // mcslam run: the SLAM job on a folder of observations: the full back end (two-view initialisation,
 // Monte Carlo tracking and mapping), or, with --known-map, pose tracking against the folder's ground-truth
-// map (the paper's precision test).
+// map (the paper's precision test). Any other input (image folder, video, webcam, dataset) goes through the
+// front end first (apps/image_job.h).
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -10,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
+#include "apps/image_job.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
 #include "apps/slam_job.h"
@@ -28,6 +30,8 @@ struct RunArgs {
   PoseFlags pose;
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
+  ImageJobOptions image;
+  bool displacement_given = false;  // --init-displacement-px set: image input keeps it unscaled
 };
 
 double Median(std::vector<double> v) {
@@ -36,7 +40,7 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-void RunFullSlam(const RunArgs& a) {
+slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   slam::SystemOptions options = a.system;
   options.tracker = a.pose.Resolve();
   options.smoother.alpha = a.smooth_alpha;
@@ -44,6 +48,11 @@ void RunFullSlam(const RunArgs& a) {
   options.init.method =
       a.init_method == "5point" ? geometry::EssentialMethod::kFivePointOpenCV : geometry::EssentialMethod::kEightPoint;
   options.Check();
+  return options;
+}
+
+void RunFullSlam(const RunArgs& a) {
+  const slam::SystemOptions options = ResolveSystemOptions(a);
   auto pose_kernel = MakePoseKernelFor(a.backend);
   auto point_kernel = MakePointKernelFor(a.backend);
   const SequenceInput input = LoadSequenceInput(a.input);
@@ -52,13 +61,12 @@ void RunFullSlam(const RunArgs& a) {
   spdlog::info("SLAM: {} frames, {} hypotheses/frame, {} samples/point, backend {}", input.frames.size(),
                options.tracker.hypotheses, options.mapping.samples, a.backend);
   InstallInterruptHandler();
-  size_t done = 0;
   bool announced = false;
   bool was_lost = false;
   const SlamRunResult res = RunSlam(
       input, options, std::move(pose_kernel), std::move(point_kernel), a.gt_scale,
       [&](const slam::FrameReport& r) {
-        if (++done % 50 == 0) spdlog::info("frame {}/{}", r.index + 1, input.frames.size());
+        if (!r.initialisation && (r.index + 1) % 50 == 0) spdlog::info("frame {}/{}", r.index + 1, input.frames.size());
         if (r.initialisation && !r.note.empty() && !announced) spdlog::info("{}", r.note), announced = true;
         // Log the changes of state, not every lost frame.
         const bool lost = r.status == slam::FrameStatus::kLost;
@@ -105,6 +113,10 @@ void RunFullSlam(const RunArgs& a) {
 }
 
 void Run(const RunArgs& a) {
+  if (!a.known_map && IsImageInput(a.input, a.image)) {
+    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, a.image, a.displacement_given);
+    return;
+  }
   if (!a.known_map) return RunFullSlam(a);
   slam::KnownMapOptions options;
   options.tracker = a.pose.Resolve();
@@ -164,16 +176,24 @@ void RegisterRun(CLI::App& app) {
   auto args = std::make_shared<RunArgs>();
   CLI::App* cmd = app.add_subcommand(
       "run", "SLAM on a sequence: writes trajectory.txt, trajectory_smoothed.txt, map.ply, frames.csv");
-  cmd->add_option("input", args->input, "Input folder (as written by `mcslam synth`)")->required();
+  cmd->add_option("input", args->input,
+                  "Input: a folder of observations (as written by `mcslam synth`), an image folder, a video file, a "
+                  "webcam index (N or webcam:N) or a dataset folder (KITTI, TUM, EuRoC, 7-Scenes)")
+      ->required();
   cmd->add_option("--out", args->out, "Output folder")->required();
   cmd->add_flag("--known-map", args->known_map, "Track against the folder's ground-truth map (map_gt.ply) instead of building one");
   cmd->add_flag("--gt-scale", args->gt_scale, "Take the first baseline's length from the ground truth (as the paper does)");
   cmd->add_option("--init-method", args->init_method, "Essential matrix: 8point (normalised 8-point + RANSAC + LM) or 5point (OpenCV)")
       ->check(CLI::IsMember({"8point", "5point"}))
       ->capture_default_str();
-  cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
-                  "Median feature displacement that starts the initialisation")
+  CLI::Option* displacement = cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
+                  "Median feature displacement that starts the initialisation (image input: scaled by f / 500 px "
+                  "unless given)")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--init-parallax-deg", args->system.init.min_median_parallax_deg,
+                  "Median parallax the initialisation needs (two views and the refined window)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--samples", args->system.mapping.samples, "Monte Carlo samples per adjusted point")
       ->check(CLI::Range(1, 1 << 22))
@@ -199,7 +219,11 @@ void RegisterRun(CLI::App& app) {
       ->capture_default_str();
   args->pose.Add(cmd);
   AddBackendFlag(cmd, &args->backend);
-  cmd->callback([args] { Run(*args); });
+  AddImageJobFlags(cmd, &args->image);
+  cmd->callback([args, displacement] {
+    args->displacement_given = displacement->count() > 0;
+    Run(*args);
+  });
 }
 
 }  // namespace mcslam::apps

@@ -180,7 +180,9 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
                                                                    {io.method, options_.seed + 1},
                                                                    {geometry::EssentialMethod::kFivePointOpenCV, 0},
                                                                    {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
+  bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
   for (const auto& [method, seed] : tries) {
+    if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
     geometry::TwoViewOptions tv;
     tv.method = method;
     tv.ransac_threshold_px = io.ransac_threshold_px;
@@ -190,6 +192,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
     if (!tvr.ok) {
       last_failure = "two-view geometry failed: " + tvr.failure;
+      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint;
       continue;
     }
     if (tvr.num_inliers < io.min_inliers || tvr.num_triangulated < io.min_points ||

@@ -3,6 +3,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "io/ply.h"
 #include "io/trajectory_io.h"
 #include "test_util.h"
 #include <filesystem>
@@ -96,6 +97,35 @@ TEST(CliRun, BadInputIsAClearError) {
   r = RunMcslam("run " + dir / "t --known-map --hypotheses 0 --out " + dir / "r");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--hypotheses"), std::string::npos) << r.output;
+}
+
+TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 60 --out " + dir / "s").exit_code, 0);
+  const auto r = RunMcslam("run " + dir / "s --gt-scale --hypotheses 65536 --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=60 lost=0"), std::string::npos) << r.output;
+  EXPECT_EQ(io::ReadTum(dir / "r/trajectory.txt").size(), 60u);
+  EXPECT_EQ(io::ReadTum(dir / "r/trajectory_smoothed.txt").size(), 60u);
+  EXPECT_GT(io::ReadPly(dir / "r/map.ply").points.size(), 100u);
+  const std::string csv = ReadText(dir / "r/frames.csv");
+  EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 61);
+  EXPECT_NE(csv.find("trans_err_m"), std::string::npos);
+  EXPECT_NE(csv.find("initialised from frames"), std::string::npos);
+  // Clean data: the paper's bounds with a wide margin (measured ~2 mm / 0.05 deg).
+  const double ate = std::stod(r.output.substr(r.output.find("trans_mean_m=") + 13));
+  EXPECT_LT(ate, 0.01);
+}
+
+TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {
+  TempDir dir;
+  // A camera 10^4 times slower than a hand-held one: the features never move enough.
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 30 --speed 0.0001 --out " + dir / "s").exit_code, 0);
+  const auto r = RunMcslam("run " + dir / "s --out " + dir / "r");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("never moved enough to initialise"), std::string::npos) << r.output;
+  EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 31);  // every frame reported, as waiting
+  EXPECT_TRUE(std::filesystem::exists(dir / "r/trajectory.txt"));
 }
 
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {

@@ -1,0 +1,155 @@
+// The full back end (paper §6) on the synthetic scenario: initialisation, tracking, mapping.
+#include <gtest/gtest.h>
+
+#include "apps/slam_job.h"
+#include "core/random.h"
+#include "eval/trajectory_eval.h"
+#include "sim/paper_scenario.h"
+#include "slam/system.h"
+
+namespace mcslam::slam {
+namespace {
+
+apps::SequenceInput Scenario(int frames, double noise, double outliers, uint64_t seed = 1) {
+  sim::PaperScenarioOptions so;
+  so.frames = frames;
+  so.noise_px = noise;
+  so.outlier_fraction = outliers;
+  so.seed = seed;
+  return apps::KnownMapInputFromSequence(sim::MakePaperScenario(so));
+}
+
+SystemOptions FastOptions() {
+  SystemOptions o;
+  o.tracker.hypotheses = 1 << 16;
+  return o;
+}
+
+apps::SlamRunResult RunSystem(const apps::SequenceInput& in, bool gt_scale = true) {
+  return apps::RunSlam(in, FastOptions(), compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), gt_scale);
+}
+
+TEST(System, CleanScenarioFromObservationsAlone) {
+  const apps::SequenceInput in = Scenario(120, 0.0, 0.0);
+  const apps::SlamRunResult res = RunSystem(in);
+  ASSERT_TRUE(res.initialised);
+  int tracked = 0;
+  for (const FrameReport& r : res.reports) tracked += r.status == FrameStatus::kTracked;
+  EXPECT_EQ(tracked, 120);
+  const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+  // Measured 2.5 mm / 0.05 deg at 2^16 hypotheses; the bounds leave 2x for other seeds and libraries, and
+  // stay well inside the paper's 2 cm / 1 degree.
+  EXPECT_LT(err.ate_m.mean, 0.005);
+  EXPECT_LT(err.rot_deg.mean, 0.2);
+  EXPECT_NEAR(err.alignment_result.gt_world_from_est_world.scale, 1.0, 0.02);  // --gt-scale sets the scale
+  EXPECT_GT(res.map.points.size(), 150u);
+  // The map matches the ground-truth points after the same alignment: median error under 1 cm.
+  std::vector<double> point_err;
+  const Pose world_from_cam0 = in.groundtruth.world_from_cam.front();
+  const sim::SyntheticSequence seq = [] {
+    sim::PaperScenarioOptions so;
+    so.frames = 1;
+    return sim::MakePaperScenario(so);
+  }();
+  for (size_t i = 0; i < res.map.points.size(); ++i) {
+    const Eigen::Vector3d gt_in_cam0 = world_from_cam0.Inverse() * seq.points_in_world[res.map.ids[i]];
+    point_err.push_back((res.map.points[i] - gt_in_cam0).norm());
+  }
+  std::nth_element(point_err.begin(), point_err.begin() + point_err.size() / 2, point_err.end());
+  EXPECT_LT(point_err[point_err.size() / 2], 0.01);
+}
+
+TEST(System, NoisyScenarioIsTrackedThroughout) {
+  // sigma = 1 px and 10 % wrong matches: every frame tracked; accuracy is issue #4's open point (see the
+  // issue note): measured 1.4 cm / 1.9 deg on this sequence, asserted loosely as a regression guard only.
+  const apps::SequenceInput in = Scenario(120, 1.0, 0.1, 3);
+  const apps::SlamRunResult res = RunSystem(in);
+  ASSERT_TRUE(res.initialised);
+  int lost = 0;
+  for (const FrameReport& r : res.reports) lost += r.status == FrameStatus::kLost;
+  EXPECT_EQ(lost, 0);
+  const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+  EXPECT_LT(err.ate_m.mean, 0.05);
+  // The final reprojection error of the inliers is at the noise level (mean |n| of 2-D noise at 1 px: 1.25).
+  EXPECT_LT(res.reports.back().reproj_mean_px, 2.0);
+}
+
+TEST(System, StaticCameraNeverInitialises) {
+  apps::SequenceInput in = Scenario(40, 0.5, 0.0);
+  for (auto& f : in.frames) f.features = in.frames.front().features;  // the camera does not move
+  const apps::SlamRunResult res = RunSystem(in);
+  EXPECT_FALSE(res.initialised);
+  ASSERT_EQ(res.reports.size(), 40u);
+  for (const FrameReport& r : res.reports) EXPECT_EQ(r.status, FrameStatus::kWaitingForInit);
+  EXPECT_NE(res.reports.back().note.find("displacement"), std::string::npos) << res.reports.back().note;
+}
+
+TEST(System, PlanarSceneDoesNotCrashAndSaysWhy) {
+  // Points on one plane, seen by the scenario's moving camera: the two-view geometry refuses a planar scene
+  // (a homography explains it), so the system keeps waiting and says so.
+  sim::PaperScenarioOptions so;
+  so.frames = 60;
+  const sim::SyntheticSequence seq = sim::MakePaperScenario(so);
+  apps::SequenceInput in;
+  in.camera = seq.camera;
+  CounterRng rng(5, 0);
+  std::vector<Eigen::Vector3d> plane;
+  for (int i = 0; i < 300; ++i) plane.emplace_back(rng.Uniform(-0.6, 0.6), rng.Uniform(-0.6, 0.6), 0.3);
+  for (size_t k = 0; k < seq.cam_from_world.size(); ++k) {
+    FrameObservations f;
+    f.index = static_cast<int64_t>(k);
+    f.stamp_s = seq.stamps_s[k];
+    for (size_t i = 0; i < plane.size(); ++i) {
+      Eigen::Vector2d uv;
+      if (seq.camera.ProjectWorld(seq.cam_from_world[k], plane[i], &uv) && seq.camera.InImage(uv))
+        f.features.push_back({static_cast<int64_t>(i), uv});
+    }
+    in.frames.push_back(f);
+  }
+  apps::SlamRunResult res;
+  ASSERT_NO_THROW(res = RunSystem(in, /*gt_scale=*/false));
+  ASSERT_EQ(res.reports.size(), 60u);
+  bool said_planar = false;
+  for (const FrameReport& r : res.reports) said_planar |= r.note.find("planar") != std::string::npos;
+  EXPECT_FALSE(res.initialised);
+  EXPECT_TRUE(said_planar);
+}
+
+TEST(System, LostFrameIsCountedAndTrackingResumes) {
+  apps::SequenceInput in = Scenario(80, 0.0, 0.0);
+  in.frames[60].features.resize(3);  // too few to score: lost
+  const apps::SlamRunResult res = RunSystem(in);
+  ASSERT_TRUE(res.initialised);
+  EXPECT_EQ(res.reports[60].status, FrameStatus::kLost);
+  EXPECT_FALSE(res.reports[60].has_pose);
+  for (int i = 61; i < 80; ++i) EXPECT_EQ(res.reports[i].status, FrameStatus::kTracked) << i;
+}
+
+TEST(System, SameSeedSameResult) {
+  const apps::SequenceInput in = Scenario(50, 1.0, 0.1);
+  const auto a = RunSystem(in), b = RunSystem(in);
+  ASSERT_EQ(a.reports.size(), b.reports.size());
+  for (size_t i = 0; i < a.reports.size(); ++i) {
+    ASSERT_EQ(a.reports[i].has_pose, b.reports[i].has_pose);
+    if (a.reports[i].has_pose) {
+      EXPECT_EQ(a.reports[i].cam_from_world.t, b.reports[i].cam_from_world.t) << i;
+    }
+  }
+}
+
+TEST(SystemOptions, CheckNamesTheField) {
+  SystemOptions o;
+  o.mapping.window = 1;
+  try {
+    o.Check();
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("window"), std::string::npos);
+  }
+  o = {};
+  o.init.min_inliers = 3;
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mcslam::slam
