@@ -67,7 +67,9 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
       throw std::invalid_argument("bundle adjustment: observation index out of range");
     auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 4, 3, 3>(
         new ReprojectionError(o.uv_norm, options.focal_px));
-    problem.AddResidualBlock(cost, new ceres::HuberLoss(options.huber_px), q[o.camera].data(), t[o.camera].data(),
+    ceres::LossFunction* loss = options.cauchy ? static_cast<ceres::LossFunction*>(new ceres::CauchyLoss(options.huber_px))
+                                               : new ceres::HuberLoss(options.huber_px);
+    problem.AddResidualBlock(cost, loss, q[o.camera].data(), t[o.camera].data(),
                              pts[o.point].data());
   }
   for (size_t i = 0; i < cams.size(); ++i) {

@@ -21,6 +21,9 @@ struct BundleObservation {
 struct BundleAdjustOptions {
   double focal_px = 500;         // residuals are in pixels: normalised error times this
   double huber_px = 2.0;         // robust loss scale
+  // Cauchy instead of Huber: its influence falls off for large residuals, so wrong matches (tens of px)
+  // stop pulling; Huber's stays constant.
+  bool cauchy = false;
   int max_iterations = 50;
   int num_threads = 1;
   void Check() const;            // throws std::invalid_argument naming the bad field

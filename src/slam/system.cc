@@ -34,6 +34,18 @@ void Fail(const std::string& what) { throw std::invalid_argument(what); }
 
 }  // namespace
 
+PoseMethod ParsePoseMethod(const std::string& name) {
+  if (name == "mc") return PoseMethod::kMonteCarlo;
+  if (name == "pnp") return PoseMethod::kPnp;
+  throw std::invalid_argument(fmt::format("pose method must be 'mc' or 'pnp', got '{}'", name));
+}
+
+StructureMethod ParseStructureMethod(const std::string& name) {
+  if (name == "mc") return StructureMethod::kMonteCarlo;
+  if (name == "ba") return StructureMethod::kBundleAdjustment;
+  throw std::invalid_argument(fmt::format("structure method must be 'mc' or 'ba', got '{}'", name));
+}
+
 const char* ToString(FrameStatus s) {
   switch (s) {
     case FrameStatus::kWaitingForInit: return "waiting";
@@ -69,6 +81,8 @@ void MappingOptions::Check() const {
 }
 
 void SystemOptions::Check() const {
+  if (ba_iterations < 1) Fail(fmt::format("ba_iterations must be >= 1, got {}", ba_iterations));
+  if (ba_fixed_keyframes < 1) Fail(fmt::format("ba_fixed_keyframes must be >= 1, got {}", ba_fixed_keyframes));
   tracker.Check();
   init.Check();
   mapping.Check();
@@ -342,7 +356,9 @@ FrameReport System::TrackFrame(int slot) {
   std::vector<double> res;
   std::vector<uint8_t> inl;
   const Pose prev = map_.frames[last_posed_slot_].cam_from_world;
-  const PoseEstimate est = tracker_->Track(prev, obs, static_cast<uint64_t>(fr.index), &res, &inl);
+  const PoseEstimate est = options_.pose_method == PoseMethod::kPnp
+                               ? EstimatePosePnp(obs, &res, &inl)
+                               : tracker_->Track(prev, obs, static_cast<uint64_t>(fr.index), &res, &inl);
   r.track_ms = Ms(t0);
   r.scored = est.scored;
   r.inliers = est.inliers;
@@ -371,7 +387,12 @@ FrameReport System::TrackFrame(int slot) {
     r.map_ms = Ms(t1);
     if (options_.mapping.adjust) {
       const auto t2 = std::chrono::steady_clock::now();
-      AdjustPoints(slot, &r);
+      if (options_.structure_method == StructureMethod::kBundleAdjustment) {
+        BundleAdjustWindow(slot, &r);
+        r.cam_from_world = fr.cam_from_world;  // the adjustment moved this keyframe too
+      } else {
+        AdjustPoints(slot, &r);
+      }
       r.adjust_ms = Ms(t2);
     }
   }
@@ -458,16 +479,117 @@ int System::TriangulateNewPoints(int slot) {
   return added;
 }
 
+std::vector<int> System::WindowSlots() const {
+  std::vector<int> window;  // frame slots, newest first
+  for (int wi : FibonacciWindow(static_cast<int>(map_.keyframes.size()), options_.mapping.window))
+    if (map_.frames[map_.keyframes[wi]].has_pose) window.push_back(map_.keyframes[wi]);
+  return window;
+}
+
+PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
+                                     std::vector<uint8_t>* inl) const {
+  // The pose baseline (§8): RANSAC EPnP on every observed map point, refined by Levenberg-Marquardt on the
+  // inliers; inliers and keyframes decided as for the Monte Carlo estimate.
+  PoseEstimate est;
+  std::vector<Eigen::Vector3d> P;
+  std::vector<Eigen::Vector2d> uv;
+  for (const PointObservation& o : obs) P.push_back(o.point_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_undistorted_px));
+  est.scored = static_cast<int>(P.size());
+  geometry::PnpOptions po;
+  po.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = options_.tracker.min_inliers;
+  const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+  res->assign(obs.size(), std::numeric_limits<double>::infinity());
+  inl->assign(obs.size(), 0);
+  if (!pose) {
+    est.lost_reason = fmt::format("PnP failed on {} points", P.size());
+    return est;
+  }
+  est.cam_from_world = *pose;
+  est.inliers = tracker_->ClassifyInliers(*pose, obs, res, inl);
+  if (est.inliers < options_.tracker.min_inliers) {
+    est.lost_reason = fmt::format("{} inliers (< {})", est.inliers, options_.tracker.min_inliers);
+    return est;
+  }
+  est.tracked = true;
+  est.keyframe = est.inliers >= options_.tracker.keyframe_min_inlier_ratio * est.scored;
+  return est;
+}
+
+void System::BundleAdjustWindow(int slot, FrameReport* r) {
+  // The structure baseline (§8): Levenberg-Marquardt bundle adjustment (Ceres, Huber) of the poses of the
+  // same Fibonacci keyframe window the Monte Carlo adjustment scores over, and of every point seen at least
+  // twice in it; the oldest keyframes stay fixed (gauge and scale). Outliers leave the map by the same rule
+  // as in the Monte Carlo adjustment: median residual over the window above the threshold.
+  const MappingOptions& mo = options_.mapping;
+  const std::vector<int> adjustable_slots = WindowSlots();
+  if (adjustable_slots.size() < 3) return;
+  // The cameras: every posed keyframe from the oldest of the window to this one. The window's keyframes are
+  // adjusted (but for the oldest, which fix the gauge and the scale); the keyframes between them are held
+  // fixed, so that a point moved here stays consistent with every view of it that a later window may use.
+  std::vector<int> window;  // oldest first
+  std::vector<bool> fixed;
+  const int oldest = adjustable_slots.back();
+  for (int k : map_.keyframes) {
+    if (k < oldest || !map_.frames[k].has_pose) continue;
+    const bool in_window = std::find(adjustable_slots.begin(), adjustable_slots.end(), k) != adjustable_slots.end();
+    const int rank = static_cast<int>(adjustable_slots.end() - std::find(adjustable_slots.begin(), adjustable_slots.end(), k));
+    window.push_back(k);
+    fixed.push_back(!in_window || rank <= options_.ba_fixed_keyframes);
+  }
+  std::vector<Pose> cams;
+  for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
+  std::unordered_map<int64_t, int> index;
+  std::vector<MapPoint*> pts;
+  std::vector<Eigen::Vector3d> X;
+  std::vector<geometry::BundleObservation> obs;
+  std::unordered_map<int64_t, int> count;
+  for (int s : window)
+    for (const FeatureUndistorted& f : map_.frames[s].features)
+      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
+  for (size_t w = 0; w < window.size(); ++w)
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
+      MapPoint* p = map_.Find(f.id);
+      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
+      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(pts.size()));
+      if (fresh) pts.push_back(p), X.push_back(p->position_in_world);
+      obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
+    }
+  if (pts.empty()) return;
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  bo.huber_px = options_.init.refine_huber_px;
+  bo.max_iterations = options_.ba_iterations;
+  bo.cauchy = true;  // wrong matches of tens of pixels must stop pulling (Huber's pull never fades)
+  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  for (size_t w = 0; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
+  std::vector<std::vector<double>> residuals(pts.size());
+  for (const geometry::BundleObservation& o : obs) {
+    const Eigen::Vector3d pc = cams[o.camera] * X[o.point];
+    residuals[o.point].push_back(pc.z() > 0 ? bo.focal_px * (pc.head<2>() / pc.z() - o.uv_norm).norm() : 1e9);
+  }
+  const FrameRecord& cur = map_.frames[slot];
+  for (size_t i = 0; i < pts.size(); ++i) {
+    pts[i]->position_in_world = X[i];
+    if (residuals[i].size() >= 3 && Median(residuals[i]) > mo.adjust_threshold_px) {
+      pts[i]->state = PointState::kRemoved;
+      pts[i]->removed_frame = cur.index;
+      ++r->removed;
+    } else {
+      ++r->adjusted;
+    }
+  }
+}
+
 void System::AdjustPoints(int slot, FrameReport* r) {
   const MappingOptions& mo = options_.mapping;
   const FrameRecord& cur = map_.frames[slot];
-  const std::vector<int> window_idx = FibonacciWindow(static_cast<int>(map_.keyframes.size()), mo.window);
   std::vector<int> window;  // frame slots
   std::vector<compute::ScaledPose> poses;
-  for (int wi : window_idx) {
-    const FrameRecord& k = map_.frames[map_.keyframes[wi]];
-    if (!k.has_pose) continue;
-    window.push_back(map_.keyframes[wi]);
+  for (int ws : WindowSlots()) {
+    const FrameRecord& k = map_.frames[ws];
+    window.push_back(ws);
     const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
     const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
     const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};

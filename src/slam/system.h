@@ -62,7 +62,17 @@ struct MappingOptions {
   void Check() const;
 };
 
+// The estimators of each step: the paper's Monte Carlo ones, or the baselines it compares with (§8).
+enum class PoseMethod { kMonteCarlo, kPnp };                    // PnP: OpenCV RANSAC EPnP + LM refinement
+enum class StructureMethod { kMonteCarlo, kBundleAdjustment };  // BA: Ceres over the same keyframe window
+PoseMethod ParsePoseMethod(const std::string& name);            // "mc" | "pnp"
+StructureMethod ParseStructureMethod(const std::string& name);  // "mc" | "ba"
+
 struct SystemOptions {
+  PoseMethod pose_method = PoseMethod::kMonteCarlo;
+  StructureMethod structure_method = StructureMethod::kMonteCarlo;
+  int ba_iterations = 10;    // Levenberg-Marquardt iteration cap of the local bundle adjustment
+  int ba_fixed_keyframes = 2;  // the oldest keyframes of the window held fixed (gauge, including scale)
   PoseTrackerOptions tracker;
   InitOptions init;
   MappingOptions mapping;
@@ -118,6 +128,10 @@ class System {
   FrameReport TrackFrame(int slot);
   int TriangulateNewPoints(int slot);
   void AdjustPoints(int slot, FrameReport* r);
+  void BundleAdjustWindow(int slot, FrameReport* r);
+  PoseEstimate EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
+                               std::vector<uint8_t>* inl) const;
+  std::vector<int> WindowSlots() const;
   void ResidualStats(int slot, FrameReport* r) const;
   void MarkSeen(int slot);
 

@@ -137,6 +137,34 @@ TEST(System, SameSeedSameResult) {
   }
 }
 
+TEST(System, BaselinesRunEndToEndAndAreExactOnCleanData) {
+  // The paper's comparison (§8): PnP for the pose step, local bundle adjustment for the structure step.
+  // On exact observations both solve their least-squares problems exactly (Monte Carlo sampling cannot:
+  // it stops at the resolution of its samples, ~2 mm here).
+  const apps::SequenceInput in = Scenario(60, 0.0, 0.0);
+  for (auto [pose, structure] : {std::pair{PoseMethod::kPnp, StructureMethod::kMonteCarlo},
+                                 std::pair{PoseMethod::kMonteCarlo, StructureMethod::kBundleAdjustment},
+                                 std::pair{PoseMethod::kPnp, StructureMethod::kBundleAdjustment}}) {
+    SystemOptions o = FastOptions();
+    o.pose_method = pose;
+    o.structure_method = structure;
+    const auto res = apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), true);
+    ASSERT_TRUE(res.initialised);
+    int tracked = 0;
+    for (const FrameReport& r : res.reports) tracked += r.status == FrameStatus::kTracked;
+    EXPECT_EQ(tracked, 60);
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    if (pose == PoseMethod::kPnp) {
+      // Measured ~1e-8 m: least squares on exact data; 1e-5 m leaves room for solver tolerances.
+      EXPECT_LT(err.ate_m.mean, 1e-5);
+    } else {
+      EXPECT_LT(err.ate_m.mean, 0.005);  // the Monte Carlo pose step's sampling resolution dominates
+    }
+  }
+  EXPECT_THROW(ParsePoseMethod("icp"), std::invalid_argument);
+  EXPECT_THROW(ParseStructureMethod("lm"), std::invalid_argument);
+}
+
 TEST(SystemOptions, CheckNamesTheField) {
   SystemOptions o;
   o.mapping.window = 1;
