@@ -45,6 +45,23 @@ mkdir -p "$DOCS"
   echo "![pose step time](fig8_pose_time.png)"
   echo "![accuracy against time](accuracy_vs_time.png)"
   echo
+  cat <<'FINDINGS'
+## Findings (2026-11-21 run; timings taken on a shared, loaded 2-core machine)
+
+- Structure step: the Monte Carlo adjustment costs a fraction of a millisecond per keyframe (it re-samples
+  only the points whose window residual is above 2.5 px) against ~100 ms for the local bundle adjustment of
+  the same window, and its trajectory is better on this noisy scenario (2.8 cm against 11.5 cm).
+- Where bundle adjustment wins: it fits the observations more tightly (reprojection 1.22 px against
+  1.36 px), and on clean observations it is exact (the baseline test reaches 1e-8 m) while Monte Carlo
+  sampling stops at its resolution (~2 mm). Its worse trajectory here comes from fitting each local window
+  tightly while drifting; a fuller local BA (covisibility, more fixed context) may close the gap: not done.
+- Pose step: PnP is about 9x faster than the Monte Carlo estimate (2^18 hypotheses on the CPU) but, fed the
+  same map, about 4x less accurate here (11.9 cm against 2.8 cm): RANSAC EPnP + LM on each frame alone is
+  more sensitive to the 10 % wrong matches than the capped, inlier-gated Monte Carlo score.
+- Accuracy against samples: 1024 samples per point already beat every bundle-adjustment setting; 4096 (the
+  default) is at the noise floor of this scenario.
+FINDINGS
+  echo
   echo "Run summaries:"
   echo '```'
   for f in "$WORK"/*.txt; do echo "$(basename "$f" .txt): $(cat "$f")"; done
