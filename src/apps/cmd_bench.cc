@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -27,27 +28,64 @@ struct PoseBenchArgs {
   int hypotheses = 1 << 18;
   std::vector<int> points{200};
   int repeats = 15;
-  std::string backend = "cpu";
+  std::vector<std::string> backends{"cpu"};
+  bool compare = false;  // --compare: the same as --backend cpu,cuda
 };
 
+const char* BackendName(compute::BackendKind kind) { return kind == compute::BackendKind::kCuda ? "cuda" : "cpu"; }
+
+struct PoseBenchRun {
+  std::string backend;
+  double median_ms = 0, min_ms = 0;
+  compute::BestHypothesis best;
+};
+
+// Several backends run one after the other on the same problem and table; after the first, each is
+// compared with the first (time and chosen hypothesis), which makes a quick equivalence check on a GPU.
 void BenchPose(const PoseBenchArgs& a) {
-  for (int np : a.points) {
-    auto kernel = MakePoseKernelFor(a.backend);
-    const compute::PoseFixture fx(np);
-    const compute::NormalTable table(a.hypotheses, 1);
-    kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);  // warm-up
-    std::vector<double> ms;
-    for (int r = 0; r < a.repeats; ++r) {
-      const auto t0 = std::chrono::steady_clock::now();
-      const auto best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
-      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
+  const std::vector<std::string> names = a.compare ? std::vector<std::string>{"cpu", "cuda"} : a.backends;
+  // Every kernel first: a backend that cannot run is an error before anything is timed.
+  std::vector<std::unique_ptr<compute::PoseKernel>> kernels;
+  for (const std::string& name : names) kernels.push_back(MakePoseKernelFor(name));
+  for (const auto& k : kernels)
+    if (k->kind() == compute::BackendKind::kCuda) {
+      fmt::print("# cuda device 0: {}\n", compute::CudaDeviceDescription());
+      break;
     }
-    const double med = Median(ms);
-    fmt::print("bench pose backend={} threads={} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "
-               "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
-               a.backend, compute::CpuThreadCount(), a.hypotheses, np, a.repeats, med,
-               *std::min_element(ms.begin(), ms.end()), double(a.hypotheses) * np / (med * 1e-3));
+  const compute::NormalTable table(a.hypotheses, 1);
+  for (int np : a.points) {
+    const compute::PoseFixture fx(np);
+    std::vector<PoseBenchRun> runs;
+    for (const auto& kernel : kernels) {
+      kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);  // warm-up (and table upload)
+      PoseBenchRun run;
+      run.backend = BackendName(kernel->kind());
+      std::vector<double> ms;
+      for (int r = 0; r < a.repeats; ++r) {
+        const auto t0 = std::chrono::steady_clock::now();
+        run.best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
+        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        if (run.best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
+      }
+      run.median_ms = Median(ms);
+      run.min_ms = *std::min_element(ms.begin(), ms.end());
+      const std::string where = kernel->kind() == compute::BackendKind::kCuda
+                                    ? std::string("device=0")
+                                    : fmt::format("threads={}", compute::CpuThreadCount());
+      fmt::print("bench pose backend={} {} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "
+                 "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
+                 run.backend, where, a.hypotheses, np, a.repeats, run.median_ms, run.min_ms,
+                 double(a.hypotheses) * np / (run.median_ms * 1e-3));
+      runs.push_back(run);
+    }
+    for (size_t i = 1; i < runs.size(); ++i) {
+      const PoseBenchRun &x = runs[0], &y = runs[i];
+      const double rel = std::abs(double(y.best.score) - x.best.score) / std::max(std::abs(double(x.best.score)), 1e-30);
+      fmt::print("bench pose compare {}_vs_{} points={} speedup={:.2f} best_index={}/{} best_score={:.6g}/{:.6g} "
+                 "score_rel_diff={:.2e}\n",
+                 y.backend, x.backend, np, x.median_ms / y.median_ms, y.best.index, x.best.index, y.best.score,
+                 x.best.score, rel);
+    }
   }
 }
 
@@ -98,7 +136,15 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   pose->add_option("--repeats", pa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
-  AddBackendFlag(pose, &pa->backend);
+  CLI::Option* backend =
+      pose->add_option("--backend", pa->backends,
+                       "Compute backend: cpu, cuda or auto (cuda when a GPU is present); several, comma-separated "
+                       "(cpu,cuda), run side by side on the same problem and are compared")
+          ->delimiter(',')
+          ->check(CLI::IsMember({"cpu", "cuda", "auto"}))
+          ->capture_default_str();
+  pose->add_flag("--compare", pa->compare, "CPU and CUDA side by side (the same as --backend cpu,cuda)")
+      ->excludes(backend);
   pose->callback([pa] { BenchPose(*pa); });
 
   auto sa = std::make_shared<SweepArgs>();

@@ -47,25 +47,39 @@ void AddBackendFlag(CLI::App* cmd, std::string* backend) {
 }
 
 namespace {
-// True for the CPU backend; throws when CUDA is asked for and cannot be had.
-bool UseCpu(const std::string& backend) {
-  const bool gpu = compute::CudaDeviceCount() > 0;
-  if (backend == "cpu" || (backend == "auto" && !gpu)) return true;
+// Resolves --backend to the backend to use: "cpu"; "cuda", an error when it cannot be had (no CUDA build, no
+// device) and never a silent fallback; "auto", CUDA when a device is present, else the CPU.
+compute::BackendKind ResolveBackend(const std::string& backend) {
+  if (backend == "cpu") return compute::BackendKind::kCpu;
+  if (backend == "auto")
+    return compute::CudaCompiled() && compute::CudaDeviceCount() > 0 ? compute::BackendKind::kCuda
+                                                                      : compute::BackendKind::kCpu;
+  if (backend != "cuda") throw std::invalid_argument("--backend " + backend + ": unknown backend (cpu, cuda or auto)");
   if (!compute::CudaCompiled())
     throw std::invalid_argument("--backend cuda: this build has no CUDA backend (nvcc was not found when it was configured)");
-  if (!gpu) throw std::invalid_argument("--backend cuda: " + compute::CudaDeviceDescription());
-  throw std::invalid_argument("--backend cuda: the CUDA kernels are not implemented yet (issue: CUDA backend)");
+  if (compute::CudaDeviceCount() == 0)
+    throw std::invalid_argument("--backend cuda: " + compute::CudaDeviceDescription() +
+                                " (--backend cpu, or auto, runs on the CPU)");
+  return compute::BackendKind::kCuda;
 }
 }  // namespace
 
 std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backend) {
-  UseCpu(backend);
-  return compute::MakeCpuPoseKernel();
+  if (ResolveBackend(backend) == compute::BackendKind::kCpu) return compute::MakeCpuPoseKernel();
+#ifdef MCSLAM_WITH_CUDA
+  return compute::MakeCudaPoseKernel();
+#else
+  throw std::logic_error("--backend cuda resolved without a CUDA build");  // unreachable: CudaCompiled() is false
+#endif
 }
 
 std::unique_ptr<compute::PointKernel> MakePointKernelFor(const std::string& backend) {
-  UseCpu(backend);
-  return compute::MakeCpuPointKernel();
+  if (ResolveBackend(backend) == compute::BackendKind::kCpu) return compute::MakeCpuPointKernel();
+#ifdef MCSLAM_WITH_CUDA
+  return compute::MakeCudaPointKernel();
+#else
+  throw std::logic_error("--backend cuda resolved without a CUDA build");  // unreachable: CudaCompiled() is false
+#endif
 }
 
 namespace {

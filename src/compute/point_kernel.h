@@ -47,4 +47,9 @@ class PointKernel {
 
 std::unique_ptr<PointKernel> MakeCpuPointKernel(int threads = 0);
 
+// CUDA backend: one block per point, its threads over the samples. Defined only in builds with the CUDA
+// backend (MCSLAM_WITH_CUDA); throws as MakeCudaPoseKernel does, and std::invalid_argument from Score when
+// the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing).
+std::unique_ptr<PointKernel> MakeCudaPointKernel(int device = 0);
+
 }  // namespace mcslam::compute

@@ -62,4 +62,11 @@ class PoseKernel {
 // CPU backend: every core (oneTBB), hypotheses vectorised across SIMD lanes. threads <= 0: all cores.
 std::unique_ptr<PoseKernel> MakeCpuPoseKernel(int threads = 0);
 
+// CUDA backend (paper §7.1): one thread per hypothesis on CUDA device `device`. The table is kept on the
+// device and uploaded again when it changes: a refill (Fill) or another table; a few entries edited in place
+// may go unseen (compute/cuda/table_key.h). Score calls on one object are serialised. Defined only in
+// builds with the CUDA backend (MCSLAM_WITH_CUDA); throws std::runtime_error when the device is not there,
+// and from Score on any CUDA error (naming the call and cudaGetErrorString).
+std::unique_ptr<PoseKernel> MakeCudaPoseKernel(int device = 0);
+
 }  // namespace mcslam::compute

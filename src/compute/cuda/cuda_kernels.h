@@ -1,0 +1,21 @@
+#pragma once
+// Introspection of the CUDA kernels (MakeCudaPoseKernel, MakeCudaPointKernel) for tests and benchmarks:
+// how often each uploaded its normal table and allocated memory. Plain C++: includable without nvcc; the
+// functions exist only in builds with the CUDA backend (MCSLAM_WITH_CUDA).
+#include "compute/point_kernel.h"
+#include "compute/pose_kernel.h"
+
+namespace mcslam::compute::cuda {
+
+struct CudaKernelStats {
+  long calls = 0;               // Score calls that reached the device
+  long table_uploads = 0;       // NormalTable copies to the device
+  long device_allocations = 0;  // cudaMalloc calls so far (the buffers only grow)
+  long pinned_allocations = 0;  // cudaMallocHost calls so far
+};
+
+// Throws std::invalid_argument when the kernel is not a CUDA kernel.
+CudaKernelStats StatsOf(const PoseKernel& kernel);
+CudaKernelStats StatsOf(const PointKernel& kernel);
+
+}  // namespace mcslam::compute::cuda

@@ -1,0 +1,119 @@
+#pragma once
+// Owning handles of the CUDA backend: device buffers, pinned host buffers and a stream. Buffers only
+// grow (by at least 1.5x), so once a kernel has seen its largest problem no call allocates again. nvcc only.
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cstddef>
+
+#include "compute/cuda/cuda_check.h"
+
+namespace mcslam::compute::cuda {
+
+// Growth policy shared by both buffer kinds: the new capacity for a request of n elements.
+inline size_t GrownCapacity(size_t capacity, size_t n) { return std::max(n, capacity + capacity / 2); }
+
+template <typename T>
+class DeviceBuffer {
+ public:
+  DeviceBuffer() = default;
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  ~DeviceBuffer() { Release(); }
+
+  // At least n elements (contents are not kept when it grows). n == 0 returns the current pointer,
+  // which may be null.
+  T* Reserve(size_t n) {
+    if (n > capacity_) {
+      const size_t c = GrownCapacity(capacity_, n);
+      Release();
+      MCSLAM_CUDA_CHECK(cudaMalloc(reinterpret_cast<void**>(&ptr_), c * sizeof(T)));
+      capacity_ = c;
+      ++allocations_;
+    }
+    return ptr_;
+  }
+  T* get() const { return ptr_; }
+  size_t capacity() const { return capacity_; }
+  long allocations() const { return allocations_; }
+  void Release() noexcept {
+    if (ptr_ != nullptr) cudaFree(ptr_);  // a destructor path: nothing useful to do with an error here
+    ptr_ = nullptr;
+    capacity_ = 0;
+  }
+
+ private:
+  T* ptr_ = nullptr;
+  size_t capacity_ = 0;
+  long allocations_ = 0;
+};
+
+// Page-locked host memory: the source and target of asynchronous copies.
+template <typename T>
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() { Release(); }
+
+  T* Reserve(size_t n) {
+    if (n > capacity_) {
+      const size_t c = GrownCapacity(capacity_, n);
+      Release();
+      MCSLAM_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&ptr_), c * sizeof(T)));
+      capacity_ = c;
+      ++allocations_;
+    }
+    return ptr_;
+  }
+  T* get() const { return ptr_; }
+  size_t capacity() const { return capacity_; }
+  long allocations() const { return allocations_; }
+  void Release() noexcept {
+    if (ptr_ != nullptr) cudaFreeHost(ptr_);
+    ptr_ = nullptr;
+    capacity_ = 0;
+  }
+
+ private:
+  T* ptr_ = nullptr;
+  size_t capacity_ = 0;
+  long allocations_ = 0;
+};
+
+class Stream {
+ public:
+  Stream() { MCSLAM_CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking)); }
+  Stream(const Stream&) = delete;
+  Stream& operator=(const Stream&) = delete;
+  ~Stream() {
+    if (stream_ != nullptr) cudaStreamDestroy(stream_);
+  }
+  cudaStream_t get() const { return stream_; }
+  void Synchronize() const { MCSLAM_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
+
+ private:
+  cudaStream_t stream_ = nullptr;
+};
+
+// Makes `device` current for a scope and restores the caller's device after it: a kernel may be called
+// from any host thread, whatever device that thread last used.
+class ScopedDevice {
+ public:
+  explicit ScopedDevice(int device) : device_(device) {
+    MCSLAM_CUDA_CHECK(cudaGetDevice(&previous_));
+    if (previous_ != device_) MCSLAM_CUDA_CHECK(cudaSetDevice(device_));
+  }
+  ScopedDevice(const ScopedDevice&) = delete;
+  ScopedDevice& operator=(const ScopedDevice&) = delete;
+  ~ScopedDevice() {
+    if (previous_ != device_) cudaSetDevice(previous_);
+  }
+
+ private:
+  int device_;
+  int previous_ = 0;
+};
+
+}  // namespace mcslam::compute::cuda
