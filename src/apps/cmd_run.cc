@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <set>
 #include <string>
 
 #include <fmt/format.h>
@@ -31,7 +32,7 @@ struct RunArgs {
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
   ImageJobOptions image;
-  bool displacement_given = false;  // --init-displacement-px set: image input keeps it unscaled
+  std::set<std::string> given_flags;  // the flags set on the command line: image input keeps their values
 };
 
 double Median(std::vector<double> v) {
@@ -114,7 +115,7 @@ void RunFullSlam(const RunArgs& a) {
 
 void Run(const RunArgs& a) {
   if (!a.known_map && IsImageInput(a.input, a.image)) {
-    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, a.image, a.displacement_given);
+    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, a.image, a.given_flags);
     return;
   }
   if (!a.known_map) return RunFullSlam(a);
@@ -186,7 +187,7 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--init-method", args->init_method, "Essential matrix: 8point (normalised 8-point + RANSAC + LM) or 5point (OpenCV)")
       ->check(CLI::IsMember({"8point", "5point"}))
       ->capture_default_str();
-  CLI::Option* displacement = cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
+  cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
                   "Median feature displacement that starts the initialisation (image input: scaled by f / 500 px "
                   "unless given)")
       ->check(CLI::PositiveNumber)
@@ -220,8 +221,10 @@ void RegisterRun(CLI::App& app) {
   args->pose.Add(cmd);
   AddBackendFlag(cmd, &args->backend);
   AddImageJobFlags(cmd, &args->image);
-  cmd->callback([args, displacement] {
-    args->displacement_given = displacement->count() > 0;
+  cmd->callback([args, cmd] {
+    for (const CLI::Option* o : cmd->get_options())
+      if (o->count() > 0)
+        for (const std::string& name : o->get_lnames()) args->given_flags.insert("--" + name);
     Run(*args);
   });
 }

@@ -40,6 +40,9 @@ double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 
 // The camera the back end's pixel defaults were tuned with (the paper's: f = 500 px at 320x240).
 constexpr double kTunedFocalPx = 500.0;
+// Image input defaults (ImageInputDefaults says why).
+constexpr double kImageInitParallaxDeg = 3.0;
+constexpr double kImageSigmaRotDeg = 0.5;
 // Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
 // of the corners in its window, and a point lost long ago is rarely found again.
 constexpr size_t kMaxRemapRequests = 200;
@@ -64,6 +67,8 @@ struct FrameRow {
   frontend::FrameStats fe;
   int features = 0, lost_tracks = 0;
   double decode_ms = 0, frame_ms = 0;
+  double backend_ms = 0;     // System::Process, wall time
+  bool before_init = false;  // the back end had no map when this frame came: its time is initialisation's
 };
 
 struct Stage {
@@ -142,8 +147,8 @@ class Overlay {
       throw std::runtime_error(fmt::format("--overlay {}: cannot open a video writer (mp4v, {}x{}, {:.3g} fps) there",
                                            path, camera.width, camera.height, fps));
   }
-  // The cube sits at the median of the first map points; its side is the median distance of the points from
-  // there, halved (about the size of the part of the scene the camera looked at first).
+  // The cube sits at the median of the first map points; its side is 0.3 times the median distance of the
+  // points from there (small against the part of the scene the camera looked at first).
   void Anchor(const std::vector<Eigen::Vector3d>& points) {
     if (points.size() < 3 || anchored_) return;
     Eigen::Vector3d centre;
@@ -156,7 +161,7 @@ class Overlay {
     std::vector<double> d;
     for (const Eigen::Vector3d& p : points) d.push_back((p - centre).norm());
     std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-    const double half = 0.25 * d[d.size() / 2];
+    const double half = 0.15 * d[d.size() / 2];
     for (int i = 0; i < 8; ++i)
       corners_[i] = centre + half * Eigen::Vector3d(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
     anchored_ = true;
@@ -295,7 +300,8 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
        "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,features,fe_tracked,fe_detected,"
        "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_retried,fe_recovered,"
-       "fe_remap_requests,fe_remapped,decode_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_detect_ms,"
+       "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
+       "fe_remap_over_budget,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_detect_ms,"
        "fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms,note\n";
   auto clean = [](std::string s) {
     for (char& c : s)
@@ -304,7 +310,7 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   };
   for (const FrameRow& row : rows) {
     if (row.skipped) {
-      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,{:.3f},{}\n", row.index,
+      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,,{:.3f},{}\n", row.index,
                        row.stamp_s, row.decode_ms, row.frame_ms, clean(row.name + ": " + row.error));
       continue;
     }
@@ -316,13 +322,13 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
       te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
     const frontend::FrameStats& s = row.fe;
     f << fmt::format(
-        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},"
+        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
         "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
         r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
         r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px, r.track_ms, r.map_ms,
         r.adjust_ms, r.init_ms, te, re, row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward,
-        s.lost_patch_error, s.lost_outside, s.retried, s.recovered, s.remap_requests,
-        s.remapped, row.decode_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.detect_ms, s.remap_ms, s.describe_ms,
+        s.lost_patch_error, s.lost_outside, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
+        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.detect_ms, s.remap_ms, s.describe_ms,
         s.describe_wait_ms, s.total_ms, row.frame_ms, clean(r.note));
   }
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
@@ -333,7 +339,11 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
 // ---- options ---------------------------------------------------------------------------------------------
 
 void ImageJobOptions::Check() const {
-  io::ParseDatasetKind(dataset);  // throws naming the value
+  try {
+    io::ParseDatasetKind(dataset);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("--dataset: {}", e.what()));
+  }
   if (format != "tum" && format != "kitti")
     throw std::invalid_argument(fmt::format("--format must be tum or kitti, got '{}'", format));
   if (start < 0) throw std::invalid_argument(fmt::format("--start must be >= 0, got {}", start));
@@ -379,17 +389,21 @@ bool IsImageInput(const std::string& input, const ImageJobOptions& options) {
   return !fs::is_regular_file(fs::path(input) / "observations.txt", ec);
 }
 
-slam::SystemOptions ScaleForCamera(slam::SystemOptions options, const PinholeCamera& camera, bool displacement_given) {
-  const double k = 0.5 * (camera.fx + camera.fy) / kTunedFocalPx;
-  // The displacement that starts the initialisation stands for an angle (20 px at f = 500 px: 2.3 degrees).
-  if (!displacement_given) options.init.min_median_displacement_px *= k;
+slam::SystemOptions ImageInputDefaults(slam::SystemOptions options, const PinholeCamera& camera,
+                                       const std::set<std::string>& given_flags) {
+  auto given = [&](const char* flag) { return given_flags.count(flag) > 0; };
+  if (!given("--init-displacement-px"))
+    options.init.min_median_displacement_px *= 0.5 * (camera.fx + camera.fy) / kTunedFocalPx;
+  if (!given("--init-parallax-deg")) options.init.min_median_parallax_deg = kImageInitParallaxDeg;
+  if (!given("--sigma-rot-deg")) options.tracker.sigma_rot_deg = kImageSigmaRotDeg;
   return options;
 }
 
 // ---- the job ---------------------------------------------------------------------------------------------
 
 ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir, const slam::SystemOptions& system_in,
-                            const std::string& backend, const ImageJobOptions& options, bool displacement_given) {
+                            const std::string& backend, const ImageJobOptions& options,
+                            const std::set<std::string>& given_flags) {
   options.Check();
   // ---- everything that can be checked before any work ----
   io::DatasetOptions dopt;
@@ -435,7 +449,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     throw std::invalid_argument(fmt::format("--end {} is out of range: {} has {} frames (0..{})", options.end,
                                             data.source->Description(), *count, *count - 1));
 
-  slam::SystemOptions sys_opts = options.scale_thresholds ? ScaleForCamera(system_in, camera, displacement_given) : system_in;
+  slam::SystemOptions sys_opts = options.image_defaults ? ImageInputDefaults(system_in, camera, given_flags) : system_in;
   sys_opts.Check();
   auto pose_kernel = MakePoseKernelFor(backend);
   auto point_kernel = MakePointKernelFor(backend);
@@ -443,6 +457,11 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   fs::create_directories(out_dir, ec);
   if (!fs::is_directory(out_dir, ec)) throw std::runtime_error(fmt::format("--out {}: cannot create the folder", out_dir));
   const fs::path out(out_dir);
+  // The overlay and the plot may go elsewhere: their folders are made now, so that the end of a long run
+  // cannot fail for want of one.
+  for (const std::string& path : {options.overlay_path, options.plot_path})
+    if (const fs::path parent = fs::path(path).parent_path(); !path.empty() && !parent.empty())
+      fs::create_directories(parent, ec);
 
   double video_fps = 30.0;
   if (options.fps > 0) {
@@ -462,10 +481,12 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
 
   const int64_t last = options.end >= 0 ? options.end : (count ? *count - 1 : -1);
   spdlog::info("{}: {} camera {} ({}); frames {}..{}; {} hypotheses/frame, {} samples/point, backend {}; "
-               "initialisation after a median displacement of {:.1f} px",
+               "initialisation after a median displacement of {:.1f} px and a median parallax of {:.1f} deg; rotation "
+               "samples {:.2f} deg; new points from {:.1f} deg of parallax",
                data.source->Description(), io::ToString(data.kind), camera.ToString(), data.camera_origin,
                options.start, last >= 0 ? fmt::format("{}", last) : std::string("end"), sys_opts.tracker.hypotheses,
-               sys_opts.mapping.samples, backend, sys_opts.init.min_median_displacement_px);
+               sys_opts.mapping.samples, backend, sys_opts.init.min_median_displacement_px,
+               sys_opts.init.min_median_parallax_deg, sys_opts.tracker.sigma_rot_deg, sys_opts.mapping.min_parallax_deg);
   if (gt) spdlog::info("ground truth: {} poses from {}", gt->size(), gt_origin);
 
   InstallInterruptHandler();
@@ -551,7 +572,10 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
       row.features = static_cast<int>(fr.features.size());
       row.lost_tracks = static_cast<int>(fr.lost.size());
 
+      row.before_init = !system.initialised();
+      const auto t_backend = Clock::now();
       const std::vector<slam::FrameReport> out_reports = system.Process(frontend::ToObservations(fr));
+      row.backend_ms = MsSince(t_backend);
       ++frames_processed;
       const slam::FrameReport* current = nullptr;
       for (const slam::FrameReport& r : out_reports) {
@@ -606,19 +630,17 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   const bool interrupted = Interrupted();
   if (interrupted) spdlog::warn("interrupted: writing the {} frames done so far", rows.size());
   if (frames_read == 0 && failure.empty() && !interrupted)
-    failure = fmt::format("--start {}: {} ended before that frame (no frame to process)", options.start,
-                          data.source->Description());
+    failure = options.start > 0 ? fmt::format("--start {}: {} ended before that frame (no frame to process)",
+                                              options.start, data.source->Description())
+                                : fmt::format("{}: no frame to process", data.source->Description());
 
   // ---- outputs (whatever happened above, what was computed is written) ----
-  // The trajectory, with the frame index of each pose. A ground truth without stamps (a KITTI poses file
-  // without times) pairs by frame index, so both sides then carry the frame index as their stamp.
-  const bool by_index = gt && !gt->has_stamps;
+  // The trajectory, with the frame index of each pose.
   io::Trajectory traj, smooth;
   std::vector<int64_t> traj_frames;
   for (const slam::FrameReport& r : reports) {
     if (!r.has_pose) continue;
-    const double stamp = by_index ? static_cast<double>(r.index) : r.stamp_s;
-    traj.stamps_s.push_back(stamp), smooth.stamps_s.push_back(stamp);
+    traj.stamps_s.push_back(r.stamp_s), smooth.stamps_s.push_back(r.stamp_s);
     traj.world_from_cam.push_back(r.cam_from_world.Inverse());
     smooth.world_from_cam.push_back(r.smoothed_cam_from_world.Inverse());
     traj_frames.push_back(r.index);
@@ -638,14 +660,16 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::optional<eval::TrajectoryErrors> errors;
   std::string eval_failure;
   if (gt && traj.size() >= 3) {
-    io::Trajectory gt_eval = *gt;
-    if (by_index) {
-      gt_eval.stamps_s.resize(gt_eval.size());
+    // A ground truth without stamps (a KITTI poses file without times) pairs by frame index: pose i is frame
+    // i of the source, so both sides carry the frame index as their stamp for the evaluation.
+    io::Trajectory gt_eval = *gt, est_eval = traj;
+    if (!gt->has_stamps) {
       for (size_t i = 0; i < gt_eval.size(); ++i) gt_eval.stamps_s[i] = static_cast<double>(i);
+      for (size_t i = 0; i < est_eval.size(); ++i) est_eval.stamps_s[i] = static_cast<double>(traj_frames[i]);
       gt_eval.has_stamps = true;
     }
     try {
-      errors = eval::EvaluateTrajectory(gt_eval, traj, {});
+      errors = eval::EvaluateTrajectory(gt_eval, est_eval, {});
     } catch (const std::exception& e) {
       eval_failure = e.what();
       spdlog::warn("no evaluation against the ground truth: {}", eval_failure);
@@ -664,8 +688,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   sum.interrupted = interrupted;
   sum.initialised = system.initialised();
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
-      be_adjust, be_init, frame_total;
-  int64_t remap_requests = 0, remapped = 0;
+      be_adjust, be_init, be_total, frame_total;
+  int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
+          remap_over_budget = 0, remap_refused = 0;
   double features_sum = 0;
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
@@ -680,6 +705,13 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     fe_detect.Add(row.fe.detect_ms), fe_remap.Add(row.fe.remap_ms), fe_describe.Add(row.fe.describe_ms);
     fe_wait.Add(row.fe.describe_wait_ms), fe_total.Add(row.fe.total_ms);
     remap_requests += row.fe.remap_requests, remapped += row.fe.remapped;
+    remap_outside += row.fe.remap_outside, remap_no_candidate += row.fe.remap_no_candidate;
+    remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
+    remap_refused += row.fe.remap_refused_id;
+    be_total.Add(row.backend_ms);
+    // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
+    // initialisation then replaces; the wall time of Process before the map exists is that time, all of it.
+    if (row.before_init) be_init.Add(row.backend_ms);
     features_sum += row.features;
   }
   for (const slam::FrameReport& r : reports) {
@@ -687,7 +719,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     sum.lost += r.status == slam::FrameStatus::kLost;
     sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
     sum.keyframes += r.keyframe;
-    be_track.Add(r.track_ms), be_map.Add(r.map_ms), be_adjust.Add(r.adjust_ms), be_init.Add(r.init_ms);
+    be_track.Add(r.track_ms), be_map.Add(r.map_ms), be_adjust.Add(r.adjust_ms);
   }
   sum.map_points = static_cast<int64_t>(cloud.points.size());
   sum.fps = frames_processed / std::max(wall_s, 1e-9);
@@ -708,6 +740,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                   {"samples_per_point", sys_opts.mapping.samples},
                   {"init_min_median_displacement_px", sys_opts.init.min_median_displacement_px},
                   {"init_min_median_parallax_deg", sys_opts.init.min_median_parallax_deg},
+                  {"sigma_rot_deg", sys_opts.tracker.sigma_rot_deg},
+                  {"new_point_min_parallax_deg", sys_opts.mapping.min_parallax_deg},
                   {"max_features", fe_opts.max_features},
                   {"describe_async", fe_opts.describe_async},
                   {"start", options.start},
@@ -728,9 +762,14 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   j["fps"] = sum.fps;
   j["frontend"] = {{"mean_features", frames_processed > 0 ? features_sum / frames_processed : 0.0},
                    {"remap_requests", remap_requests},
-                   {"remapped", remapped}};
+                   {"remapped", remapped},
+                   {"remap_refused_id", remap_refused},
+                   {"remap_outside", remap_outside},
+                   {"remap_no_candidate", remap_no_candidate},
+                   {"remap_no_match", remap_no_match},
+                   {"remap_over_budget", remap_over_budget}};
   // Front end stages and back end stages, over the frames where each did some work (map and adjust run on
-  // keyframes only, init before the map exists).
+  // keyframes only, init before the map exists: the whole of System::Process then, the successful call too).
   j["stages_ms"] = {{"decode", StageJson(decode)},
                     {"frontend_total", StageJson(fe_total)},
                     {"frontend_convert", StageJson(fe_convert)},
@@ -744,6 +783,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                     {"track", StageJson(be_track)},
                     {"map", StageJson(be_map)},
                     {"adjust", StageJson(be_adjust)},
+                    {"backend_total", StageJson(be_total)},
                     {"frame_total", StageJson(frame_total)}};
   if (errors) {
     j["ground_truth"] = {{"source", gt_origin},
