@@ -5,9 +5,15 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+#include "core/pose.h"
 
 namespace mcslam::testing {
 
@@ -68,6 +74,30 @@ inline std::string DataDir() {
   if (const char* env = std::getenv("MCSLAM_DATA"); env && *env) return env;
   if (std::filesystem::is_directory(MCSLAM_DATA_DIR_DEFAULT)) return MCSLAM_DATA_DIR_DEFAULT;
   return "";
+}
+
+// Expects f to throw an exception whose message contains needle1 (and needle2 when given).
+inline void ExpectThrowsWith(const std::function<void()>& f, const std::string& needle1, const std::string& needle2 = "") {
+  try {
+    f();
+    ADD_FAILURE() << "no exception; expected one containing '" << needle1 << "'";
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(needle1), std::string::npos) << what;
+    if (!needle2.empty()) {
+      EXPECT_NE(what.find(needle2), std::string::npos) << what;
+    }
+  }
+}
+
+// A camera at center_in_world looking at target_in_world, world +z up (camera y down): cam_from_world.
+inline Pose LookAt(const Eigen::Vector3d& center_in_world, const Eigen::Vector3d& target_in_world) {
+  const Eigen::Vector3d z = (target_in_world - center_in_world).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d world_from_cam_rot;
+  world_from_cam_rot << x, y, z;
+  return Pose::FromRotationTranslation(world_from_cam_rot, center_in_world).Inverse();
 }
 
 }  // namespace mcslam::testing

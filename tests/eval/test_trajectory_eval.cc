@@ -11,16 +11,10 @@
 namespace mcslam::eval {
 namespace {
 
+using mcslam::testing::ExpectThrowsWith;
+
 using io::Trajectory;
 
-void ExpectThrowsWith(const std::function<void()>& f, const std::string& needle) {
-  try {
-    f();
-    FAIL() << "no exception; expected one containing '" << needle << "'";
-  } catch (const std::exception& e) {
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-  }
-}
 
 // A smooth, non-planar path with changing orientation, stamps every 0.1 s.
 Trajectory MakeGroundTruth(int n) {

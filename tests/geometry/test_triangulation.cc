@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "test_util.h"
 #include "geometry/essential.h"
 #include "geometry/triangulation.h"
 #include "sim/paper_scenario.h"
@@ -14,15 +15,8 @@
 namespace mcslam::geometry {
 namespace {
 
-// A camera at center_in_world looking at target_in_world, world +z up (camera y down).
-Pose LookAt(const Eigen::Vector3d& center_in_world, const Eigen::Vector3d& target_in_world) {
-  const Eigen::Vector3d z = (target_in_world - center_in_world).normalized();
-  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d y = z.cross(x);
-  Eigen::Matrix3d world_from_cam_rot;
-  world_from_cam_rot << x, y, z;
-  return Pose::FromRotationTranslation(world_from_cam_rot, center_in_world).Inverse();
-}
+using mcslam::testing::LookAt;
+
 
 Eigen::Vector2d ProjectNorm(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world) {
   const Eigen::Vector3d p = cam_from_world * point_in_world;

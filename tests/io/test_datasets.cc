@@ -20,22 +20,12 @@
 namespace mcslam::io {
 namespace {
 
+using mcslam::testing::ExpectThrowsWith;
+
 namespace fs = std::filesystem;
 using mcslam::testing::TempDir;
 using mcslam::testing::WriteText;
 
-void ExpectThrowsWith(const std::function<void()>& f, const std::string& needle1, const std::string& needle2 = "") {
-  try {
-    f();
-    FAIL() << "no exception; expected one containing '" << needle1 << "'";
-  } catch (const std::exception& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(needle1), std::string::npos) << what;
-    if (!needle2.empty()) {
-      EXPECT_NE(what.find(needle2), std::string::npos) << what;
-    }
-  }
-}
 
 std::string DataSequence(const std::string& name) {
   const std::string data = mcslam::testing::DataDir();

@@ -12,6 +12,8 @@
 namespace mcslam::io {
 namespace {
 
+using mcslam::testing::ExpectThrowsWith;
+
 using mcslam::testing::ReadText;
 using mcslam::testing::TempDir;
 using mcslam::testing::WriteText;
@@ -30,18 +32,6 @@ Trajectory MakeTrajectory(int n, double t0 = 1403636579.758555392) {
 }
 
 // Messages must point at the place: "<path>:<line>: ...".
-void ExpectThrowsWith(const std::function<void()>& f, const std::string& needle1, const std::string& needle2 = "") {
-  try {
-    f();
-    FAIL() << "no exception; expected one containing '" << needle1 << "'";
-  } catch (const std::exception& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(needle1), std::string::npos) << what;
-    if (!needle2.empty()) {
-      EXPECT_NE(what.find(needle2), std::string::npos) << what;
-    }
-  }
-}
 
 void ExpectSamePoses(const Trajectory& a, const Trajectory& b, double tol_pos, double tol_rot_rad) {
   ASSERT_EQ(a.size(), b.size());

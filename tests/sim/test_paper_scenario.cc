@@ -8,21 +8,15 @@
 #include <string>
 #include <vector>
 
+#include "test_util.h"
 #include "core/pose.h"
 #include "sim/paper_scenario.h"
 
 namespace mcslam::sim {
 namespace {
 
-// A camera at center_in_world looking at target_in_world, world +z up (camera y down).
-Pose LookAt(const Eigen::Vector3d& center_in_world, const Eigen::Vector3d& target_in_world) {
-  const Eigen::Vector3d z = (target_in_world - center_in_world).normalized();
-  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d y = z.cross(x);
-  Eigen::Matrix3d world_from_cam_rot;
-  world_from_cam_rot << x, y, z;
-  return Pose::FromRotationTranslation(world_from_cam_rot, center_in_world).Inverse();
-}
+using mcslam::testing::LookAt;
+
 
 // Independent occlusion check: where the segment from the camera centre c to p first enters the box
 // (slab method), as a fraction of the segment; 1 means p itself is the first surface point on the ray.
