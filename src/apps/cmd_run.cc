@@ -28,6 +28,7 @@ struct RunArgs {
   bool known_map = false;
   bool gt_scale = false;
   std::string init_method = "8point";
+  std::string pose_method = "mc", structure_method = "mc";
   PoseFlags pose;
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
@@ -48,6 +49,8 @@ slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   options.seed = options.tracker.seed;
   options.init.method =
       a.init_method == "5point" ? geometry::EssentialMethod::kFivePointOpenCV : geometry::EssentialMethod::kEightPoint;
+  options.pose_method = slam::ParsePoseMethod(a.pose_method);
+  options.structure_method = slam::ParseStructureMethod(a.structure_method);
   options.Check();
   return options;
 }
@@ -191,6 +194,16 @@ void RegisterRun(CLI::App& app) {
                   "Median feature displacement that starts the initialisation (image input: scaled by f / 500 px "
                   "unless given)")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--pose", args->pose_method, "Pose step: mc (Monte Carlo, the paper) or pnp (RANSAC PnP + LM, baseline)")
+      ->check(CLI::IsMember({"mc", "pnp"}))
+      ->capture_default_str();
+  cmd->add_option("--structure", args->structure_method,
+                  "Structure step: mc (Monte Carlo point adjustment, the paper) or ba (local bundle adjustment, baseline)")
+      ->check(CLI::IsMember({"mc", "ba"}))
+      ->capture_default_str();
+  cmd->add_option("--ba-iterations", args->system.ba_iterations, "Iteration cap of the local bundle adjustment")
+      ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   cmd->add_option("--init-parallax-deg", args->system.init.min_median_parallax_deg,
                   "Median parallax the initialisation needs (two views and the refined window)")

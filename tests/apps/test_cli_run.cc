@@ -128,6 +128,17 @@ TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {
   EXPECT_TRUE(std::filesystem::exists(dir / "r/trajectory.txt"));
 }
 
+TEST(CliRun, BaselineFlagsSelectTheMethodsAndRejectUnknownOnes) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 40 --out " + dir / "s").exit_code, 0);
+  const auto r = RunMcslam("run " + dir / "s --gt-scale --pose pnp --structure ba --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=40 lost=0"), std::string::npos) << r.output;
+  const auto bad = RunMcslam("run " + dir / "s --structure lm --out " + dir / "x");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--structure"), std::string::npos) << bad.output;
+}
+
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   const auto r = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 3");
   ASSERT_EQ(r.exit_code, 0) << r.output;
