@@ -69,6 +69,16 @@ inline std::string ReadText(const std::string& path) {
   return ss.str();
 }
 
+// Lines of a text file that are neither empty nor '#' comments.
+inline int CountDataLines(const std::string& path) {
+  std::istringstream in(ReadText(path));
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line))
+    if (!line.empty() && line[0] != '#') ++n;
+  return n;
+}
+
 // Folder of the real sequences: $MCSLAM_DATA, else ../shared/data beside the source tree. Empty when absent.
 inline std::string DataDir() {
   if (const char* env = std::getenv("MCSLAM_DATA"); env && *env) return env;

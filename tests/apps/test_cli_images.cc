@@ -26,6 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing::DataDir;
+using testing::CountDataLines;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
@@ -155,15 +156,6 @@ std::string WriteImageFolder(const TempDir& dir, const std::string& name, bool w
 nlohmann::json ReadJson(const std::string& path) {
   std::ifstream f(path);
   return nlohmann::json::parse(f);
-}
-
-int CountDataLines(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  std::string line;
-  int n = 0;
-  while (std::getline(in, line))
-    if (!line.empty() && line[0] != '#') ++n;
-  return n;
 }
 
 // ---- the rendered sequences ------------------------------------------------------------------------------

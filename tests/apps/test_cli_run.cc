@@ -11,18 +11,10 @@
 namespace mcslam {
 namespace {
 
+using testing::CountDataLines;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
-
-int CountDataLines(const std::string& path) {
-  std::istringstream in(ReadText(path));
-  std::string line;
-  int n = 0;
-  while (std::getline(in, line))
-    if (!line.empty() && line[0] != '#') ++n;
-  return n;
-}
 
 TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
   TempDir dir;
