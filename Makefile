@@ -21,6 +21,8 @@ build: configure
 
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS) --timeout 900
+	@# ctest names skipped tests but not why: say once why the GPU tests skipped, if they did.
+	@ctest --test-dir $(BUILD) -R '^Cuda' --verbose 2>/dev/null | grep -m1 -o 'no CUDA device[^"]*' | sed 's/^/GPU tests skipped: /' || true
 
 demo: build
 	bash scripts/demo.sh $(BUILD)/mcslam $(DEMO_OUT)
