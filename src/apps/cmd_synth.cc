@@ -9,6 +9,7 @@
 
 #include "apps/commands.h"
 #include "sim/paper_scenario.h"
+#include "sim/render.h"
 
 namespace mcslam::apps {
 namespace {
@@ -17,6 +18,8 @@ struct SynthArgs {
   std::string scenario = "paper";
   std::string out;
   sim::PaperScenarioOptions options;
+  bool render = false;
+  sim::RenderOptions render_options;
 };
 
 // A finite number within [lo, hi], or (lo, hi] when lo_open. CLI11 puts the flag's name in front of the
@@ -52,6 +55,11 @@ void RunSynth(const SynthArgs& a) {
   // Only one scenario exists; the flag's validator already refused any other name.
   const sim::SyntheticSequence seq = sim::MakePaperScenario(a.options);
   sim::WriteSyntheticSequence(seq, a.out);
+  if (a.render) {
+    sim::RenderOptions ro = a.render_options;
+    ro.seed = a.options.seed;
+    sim::RenderSequence(seq, a.out, ro);
+  }
   // stdout carries exactly the summary line, so scripts can parse it.
   std::printf("%s scenario written to %s: %s\n", a.scenario.c_str(), a.out.c_str(),
               sim::Summarize(seq).ToString().c_str());
@@ -91,6 +99,11 @@ void RegisterSynth(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--seed", o.seed, "Seed of the points, the path's phases, the noise and the outliers")
       ->check(UnsignedInteger())
+      ->capture_default_str();
+  cmd->add_flag("--render", args->render,
+                "Also write images/NNNNNN.png: the textured box on a textured floor, ray-cast for each frame's pose");
+  cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")
+      ->check(FiniteNumber(0.0, false, 255.0, "a number in [0, 255]"))
       ->capture_default_str();
   cmd->callback([args] { RunSynth(*args); });
 }
