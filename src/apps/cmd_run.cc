@@ -118,7 +118,9 @@ void RunFullSlam(const RunArgs& a) {
 
 void Run(const RunArgs& a) {
   if (!a.known_map && IsImageInput(a.input, a.image)) {
-    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, a.image, a.given_flags);
+    ImageJobOptions image = a.image;
+    image.gt_scale = a.gt_scale;
+    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, image, a.given_flags);
     return;
   }
   if (!a.known_map) return RunFullSlam(a);

@@ -478,6 +478,10 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   fe_opts.describe_async = true;  // SIFT of the new tracks runs while the back end estimates the pose
   frontend::Frontend fe(fe_opts);
   slam::System system(camera, sys_opts, std::move(pose_kernel), std::move(point_kernel));
+  if (options.gt_scale) {
+    if (!gt) throw std::invalid_argument("--gt-scale needs a ground truth: the dataset has none and no --gt was given");
+    system.SetBaselineOracle(BaselineOracle(*gt));
+  }
 
   const int64_t last = options.end >= 0 ? options.end : (count ? *count - 1 : -1);
   spdlog::info("{}: {} camera {} ({}); frames {}..{}; {} hypotheses/frame, {} samples/point, backend {}; "

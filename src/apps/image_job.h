@@ -28,6 +28,7 @@ struct ImageJobOptions {
   int64_t start = 0;             // first frame (index in the source) to process
   int64_t end = -1;              // last frame (inclusive); -1: to the end of the source
   double fps = 0.0;              // stamps of sources without their own (index / fps); 0: the source's
+  bool gt_scale = false;         // the first baseline takes its length from the ground truth (--gt-scale)
   // The back end's defaults are tuned on the paper's synthetic sequence (320x240, f = 500 px, 1 px noise).
   // For image input the job replaces a few of them (see ImageInputDefaults) unless the user set them.
   bool image_defaults = true;

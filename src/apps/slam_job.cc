@@ -18,19 +18,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   slam::System system(input.camera, options, std::move(pose_kernel), std::move(point_kernel));
   if (gt_scale) {
     if (input.groundtruth.empty()) throw std::invalid_argument("--gt-scale needs a ground truth (groundtruth.txt)");
-    const io::Trajectory& gt = input.groundtruth;
-    system.SetBaselineOracle([&gt](double a, double b) -> std::optional<double> {
-      auto nearest = [&gt](double t) -> int {
-        int best = -1;
-        for (size_t i = 0; i < gt.size(); ++i)
-          if (std::abs(gt.stamps_s[i] - t) <= 1e-3 && (best < 0 || std::abs(gt.stamps_s[i] - t) < std::abs(gt.stamps_s[best] - t)))
-            best = static_cast<int>(i);
-        return best;
-      };
-      const int i = nearest(a), j = nearest(b);
-      if (i < 0 || j < 0) return std::nullopt;
-      return (gt.world_from_cam[i].t - gt.world_from_cam[j].t).norm();
-    });
+    system.SetBaselineOracle(BaselineOracle(input.groundtruth));
   }
   SlamRunResult res;
   std::map<int64_t, size_t> slot_of_index;
@@ -56,6 +44,22 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
     res.map.ids.push_back(p.id);
   }
   return res;
+}
+
+std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& gt) {
+  return [&gt](double a, double b) -> std::optional<double> {
+    auto nearest = [&gt](double t) -> int {
+      int best = -1;
+      for (size_t i = 0; i < gt.size(); ++i)
+        if (std::abs(gt.stamps_s[i] - t) <= 1e-3 &&
+            (best < 0 || std::abs(gt.stamps_s[i] - t) < std::abs(gt.stamps_s[best] - t)))
+          best = static_cast<int>(i);
+      return best;
+    };
+    const int i = nearest(a), j = nearest(b);
+    if (i < 0 || j < 0) return std::nullopt;
+    return (gt.world_from_cam[i].t - gt.world_from_cam[j].t).norm();
+  };
 }
 
 io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed) {

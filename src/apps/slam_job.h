@@ -2,6 +2,7 @@
 // The full SLAM job on a folder of observations: the System of the slam layer over every frame, and the
 // outputs users keep (trajectories, map, per-frame CSV with errors when the ground truth is known).
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,10 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
                       std::unique_ptr<compute::PointKernel> point_kernel, bool gt_scale,
                       const std::function<void(const slam::FrameReport&)>& on_frame = {},
                       const std::function<bool()>& stop = {});
+
+// For --gt-scale: the distance between the ground-truth camera centres at two stamps (nearest pose within
+// 1 ms of each), or nothing when either stamp has no pose. The trajectory must outlive the function.
+std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& groundtruth);
 
 io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed);
 

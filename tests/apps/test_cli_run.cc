@@ -144,6 +144,12 @@ TEST(CliRun, RenderedPaperScenarioEndToEndFromImages) {
   // Measured 4.6 mm (Sim(3) RMSE) on this 90-frame run; 2 cm, the paper's bound, leaves a 4x margin.
   const double ate = std::stod(r.output.substr(r.output.find("ate_rmse=") + 9));
   EXPECT_LT(ate, 0.02);
+  // --gt-scale on the image path: the first baseline gets its true length, so the Sim(3) alignment needs
+  // (almost) no scale. Scale drift over 90 frames stays within 25 % here.
+  const auto g = RunMcslam("run " + dir / "s --dataset synthetic --gt-scale --hypotheses 65536 --out " + dir / "g");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  const double scale = std::stod(g.output.substr(g.output.find(" scale=") + 7));
+  EXPECT_NEAR(scale, 1.0, 0.25) << g.output;
 }
 
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {
