@@ -29,7 +29,7 @@ void PoseFlags::Add(CLI::App* cmd) {
       ->capture_default_str();
   cmd->add_option("--max-distance-px", tracker.max_distance_px,
                   "Cap on one point's contribution to the score, pixels (1e4: the paper's plain sum)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1e-6, 1e6))
       ->capture_default_str();
 }
 

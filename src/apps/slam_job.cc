@@ -51,7 +51,7 @@ std::function<std::optional<double>(double, double)> BaselineOracle(const io::Tr
     auto nearest = [&gt](double t) -> int {
       int best = -1;
       for (size_t i = 0; i < gt.size(); ++i)
-        if (std::abs(gt.stamps_s[i] - t) <= 1e-3 &&
+        if (std::abs(gt.stamps_s[i] - t) <= 0.02 &&  // the association tolerance of the evaluation
             (best < 0 || std::abs(gt.stamps_s[i] - t) < std::abs(gt.stamps_s[best] - t)))
           best = static_cast<int>(i);
       return best;

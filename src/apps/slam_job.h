@@ -29,7 +29,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
                       const std::function<bool()>& stop = {});
 
 // For --gt-scale: the distance between the ground-truth camera centres at two stamps (nearest pose within
-// 1 ms of each), or nothing when either stamp has no pose. The trajectory must outlive the function.
+// 20 ms of each, as the evaluation associates), or nothing when either stamp has no pose. The trajectory must outlive the function.
 std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& groundtruth);
 
 io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed);

@@ -28,6 +28,7 @@ struct ReprojectionError {
     T p[3];
     ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
     p[0] += t[0], p[1] += t[1], p[2] += t[2];
+    if (!(p[2] > T(1e-9))) return false;  // behind the camera: Ceres rejects the step
     r[0] = T(f) * (p[0] / p[2] - T(u));
     r[1] = T(f) * (p[1] / p[2] - T(v));
     return true;
@@ -40,6 +41,7 @@ double RmsPx(const std::vector<Pose>& cams, const std::vector<Eigen::Vector3d>& 
   double s = 0;
   for (const BundleObservation& o : obs) {
     const Eigen::Vector3d p = cams[o.camera] * pts[o.point];
+    if (!(p.z() > 1e-9)) continue;  // behind the camera: no pixel residual exists
     s += (focal * (p.head<2>() / p.z() - o.uv_norm)).squaredNorm();
   }
   return obs.empty() ? 0.0 : std::sqrt(s / obs.size());

@@ -1,5 +1,8 @@
 #include "geometry/pnp.h"
 
+#include <stdexcept>
+#include <string>
+
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
@@ -8,7 +11,10 @@ namespace mcslam::geometry {
 std::optional<Pose> SolvePnp(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector2d>& uv,
                              const PnpOptions& o, int* num_inliers) {
   if (num_inliers) *num_inliers = 0;
-  const size_t n = std::min(points.size(), uv.size());
+  if (points.size() != uv.size())
+    throw std::invalid_argument("SolvePnp: " + std::to_string(points.size()) + " points but " +
+                                std::to_string(uv.size()) + " observations");
+  const size_t n = points.size();
   if (n < 4 || static_cast<int>(n) < o.min_inliers) return std::nullopt;
   std::vector<cv::Point3d> obj(n);
   std::vector<cv::Point2d> img(n);

@@ -22,7 +22,9 @@ void PoseTrackerOptions::Check() const {
   if (!(sigma_trans_floor_m > 0)) fail(fmt::format("sigma_trans_floor_m must be > 0, got {}", sigma_trans_floor_m));
   if (!(sigma_trans_scale >= 0)) fail(fmt::format("sigma_trans_scale must be >= 0, got {}", sigma_trans_scale));
   if (!(inlier_threshold_px > 0)) fail(fmt::format("inlier_threshold_px must be > 0, got {}", inlier_threshold_px));
-  if (!(max_distance_px > 0)) fail(fmt::format("max_distance_px must be > 0, got {}", max_distance_px));
+  // Finite and well inside float range: scores are float sums over up to thousands of points.
+  if (!(max_distance_px > 0 && max_distance_px <= 1e6))
+    fail(fmt::format("max_distance_px must be in (0, 1e6], got {}", max_distance_px));
   if (min_points < 3) fail(fmt::format("min_points must be >= 3, got {}", min_points));
   if (min_inliers < 3) fail(fmt::format("min_inliers must be >= 3, got {}", min_inliers));
   if (!(keyframe_min_inlier_ratio >= 0 && keyframe_min_inlier_ratio <= 1))
@@ -150,10 +152,17 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     const int count = round + 1 == options_.rounds ? options_.hypotheses - per_round * round : per_round;
     // Row 0 of the table is zero, so the centre (the best so far) is always re-scored: rounds never get worse.
     best = kernel_->Score(s, pts, params, table_, count);
+    if (best.index < 0) break;
     for (int k = 0; k < 4; ++k) s.q[k] = best.q[k];
     for (int k = 0; k < 3; ++k) s.t[k] = best.t[k];
   }
 
+  if (best.index < 0) {
+    est.lost_reason = "no finite hypothesis score";
+    residuals->assign(obs.size(), std::numeric_limits<double>::infinity());
+    inliers->assign(obs.size(), 0);
+    return est;
+  }
   const Eigen::Quaterniond q_best(best.q[0], best.q[1], best.q[2], best.q[3]);
   est.cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
   est.score = best.score;

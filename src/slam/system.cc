@@ -77,7 +77,8 @@ void MappingOptions::Check() const {
   if (window < 2) Fail(fmt::format("mapping: window must be >= 2 keyframes, got {}", window));
   if (!(sigma_scale >= 0)) Fail(fmt::format("mapping: sigma_scale must be >= 0, got {}", sigma_scale));
   if (!(sigma_floor_rel_depth > 0)) Fail(fmt::format("mapping: sigma_floor_rel_depth must be > 0, got {}", sigma_floor_rel_depth));
-  if (!(max_distance_px > 0)) Fail(fmt::format("mapping: max_distance_px must be > 0, got {}", max_distance_px));
+  if (!(max_distance_px > 0 && max_distance_px <= 1e6))
+    Fail(fmt::format("mapping: max_distance_px must be in (0, 1e6], got {}", max_distance_px));
 }
 
 void SystemOptions::Check() const {
@@ -195,8 +196,13 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
                                                                    {geometry::EssentialMethod::kFivePointOpenCV, 0},
                                                                    {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
   bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
+  bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
   for (const auto& [method, seed] : tries) {
     if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
+    if (method == geometry::EssentialMethod::kFivePointOpenCV) {
+      if (five_point_tried) continue;
+      five_point_tried = true;
+    }
     geometry::TwoViewOptions tv;
     tv.method = method;
     tv.ransac_threshold_px = io.ransac_threshold_px;
@@ -206,7 +212,11 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
     if (!tvr.ok) {
       last_failure = "two-view geometry failed: " + tvr.failure;
-      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint;
+      // Only a refusal of the data itself (too few, NaN, planar or pure rotation) holds for every seed.
+      const bool data_refused = tvr.status == geometry::TwoViewStatus::kBadInput ||
+                                tvr.status == geometry::TwoViewStatus::kTooFewCorrespondences ||
+                                tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
+      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint && data_refused;
       continue;
     }
     if (tvr.num_inliers < io.min_inliers || tvr.num_triangulated < io.min_points ||
@@ -260,6 +270,12 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
     }
     const double refined_parallax = Median(parallax);
+    std::vector<double> z;
+    for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
+    if (!(Median(z) > 0)) {
+      last_failure = "refined window: the points ended behind the reference camera";
+      continue;
+    }
     if (refined_parallax < io.min_median_parallax_deg) {
       last_failure = fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg", refined_parallax,
                                  io.min_median_parallax_deg);
@@ -275,7 +291,12 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   double baseline = 1.0;
   if (oracle_) {
     const std::optional<double> d = oracle_(ref.stamp_s, cur.stamp_s);
-    if (d && std::isfinite(*d) && *d > 0) baseline = *d;
+    if (!d || !std::isfinite(*d) || !(*d > 0))
+      throw std::runtime_error(fmt::format(
+          "--gt-scale: the ground truth gives no baseline between frames {} (t = {:.6f} s) and {} (t = {:.6f} s): "
+          "no pose near those stamps, or the camera did not move",
+          ref.index, ref.stamp_s, cur.index, cur.stamp_s));
+    baseline = *d;
   }
   const double b = (best->poses.back().OriginOfTargetInSource() - best->poses.front().OriginOfTargetInSource()).norm();
   const double s = b > 1e-12 ? baseline / b : 1.0;
@@ -647,6 +668,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     Eigen::Vector3d dz = A.ldlt().solve(b);
     if (!dz.allFinite()) dz.setZero();
     const double depth = (cur.cam_from_world * p->position_in_world).z();
+    if (!(depth > 0)) continue;  // behind this keyframe: no spread can be derived from it
     const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
     for (const auto& [w, uv_obs] : views) {
       obs_pose.push_back(w);

@@ -31,7 +31,7 @@ void ScorePoint(const PointAdjustProblem& pr, const NormalTable& normals, int sa
     VecF z[3];
     PerturbPointT<VecF>(c, s, LoadVec(normals.column(0) + b), LoadVec(normals.column(1) + b),
                         LoadVec(normals.column(2) + b), z);
-    VecF acc = cap * 0.0f;
+    VecF acc = {};  // zero (not cap * 0, which is NaN for an infinite cap)
     for (int o = o0; o < o1; ++o)
       acc += ReprojectionDistanceT<SimdMath, VecF, float, VecF>(pr.poses[pr.obs_pose[o]], z[0], z[1], z[2], pr.obs_u[o],
                                                                 pr.obs_v[o], pr.params, cap);

@@ -22,6 +22,7 @@ NormalTable::NormalTable(int count, uint64_t seed, uint32_t stream) : count_(cou
 }
 
 void NormalTable::Fill(uint64_t seed, uint32_t stream, uint64_t epoch) {
+  if (count_ <= 0) return;
   // Row i of epoch e comes from Philox blocks (e * count + i) * 2 and +1: 8 words -> 8 normals, 7 used.
   tbb::parallel_for(tbb::blocked_range<int>(1, std::max(count_, 1), 4096), [&](const tbb::blocked_range<int>& r) {
     for (int i = r.begin(); i < r.end(); ++i) {
@@ -68,7 +69,7 @@ void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseS
                                  LoadVec(normals.column(4) + h), LoadVec(normals.column(5) + h),
                                  LoadVec(normals.column(6) + h), q, t);
     const ScaledPoseT<VecF> p = MakeScaledPoseT<VecF>(q, t, k.fx, k.fy);
-    VecF acc = cap * 0.0f;
+    VecF acc = {};  // zero (not cap * 0, which is NaN for an infinite cap)
     for (int j = 0; j < np; ++j) acc += ReprojectionDistanceT<SimdMath, VecF, VecF, float>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
     const int valid = n - b < kLanes ? n - b : kLanes;
     if (valid == kLanes) {
@@ -116,6 +117,7 @@ class CpuPoseKernel final : public PoseKernel {
     });
     result.index = best.index;
     result.score = best.score;
+    if (best.index < 0) return result;  // every score NaN or infinite: no winner, nothing to rebuild
     const int i = best.index;
     PerturbPose(s, normals.column(0)[i], normals.column(1)[i], normals.column(2)[i], normals.column(3)[i],
                 normals.column(4)[i], normals.column(5)[i], normals.column(6)[i], result.q, result.t);
