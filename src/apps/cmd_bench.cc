@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "apps/commands.h"
+#include "core/median.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
 #include "compute/pose_fixture.h"
@@ -19,10 +20,6 @@ namespace mcslam::apps {
 
 namespace {
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 
 struct PoseBenchArgs {
   int hypotheses = 1 << 18;
@@ -67,7 +64,7 @@ void BenchPose(const PoseBenchArgs& a) {
         ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
         if (run.best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
       }
-      run.median_ms = Median(ms);
+      run.median_ms = UpperMedian(ms);
       run.min_ms = *std::min_element(ms.begin(), ms.end());
       const std::string where = kernel->kind() == compute::BackendKind::kCuda
                                     ? std::string("device=0")
@@ -119,7 +116,7 @@ void BenchSweep(SweepArgs a) {
     eo.alignment = eval::Alignment::kNone;
     const auto err = eval::EvaluateTrajectory(input.groundtruth, ResultsToTrajectory(results, false), eo);
     fmt::print("{:>10} {:>8} {:>14.6f} {:>14.5f} {:>12.3f} {:>8}\n", 1 << l, l, err.ate_m.mean, err.rot_deg.mean,
-               Median(ms), lost);
+               UpperMedian(ms), lost);
   }
 }
 

@@ -12,6 +12,7 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
+#include "core/median.h"
 #include "apps/image_job.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
@@ -36,11 +37,6 @@ struct RunArgs {
   std::set<std::string> given_flags;  // the flags set on the command line: image input keeps their values
 };
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   slam::SystemOptions options = a.system;
@@ -108,7 +104,7 @@ void RunFullSlam(const RunArgs& a) {
   std::string line = fmt::format("frames={} tracked={} lost={} not_initialised={} keyframes={} map_points={} "
                                  "frame_ms_median={:.3f} fps={:.1f}",
                                  res.reports.size(), tracked, lost, waiting, keyframes, res.map.points.size(),
-                                 Median(ms), res.reports.size() / std::max(res.wall_s, 1e-9));
+                                 UpperMedian(ms), res.reports.size() / std::max(res.wall_s, 1e-9));
   if (err)
     line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} scale={:.6g}", err->ate_m.rmse,
                         err->ate_m.mean, err->rot_deg.mean, err->alignment_result.gt_world_from_est_world.scale);
@@ -169,7 +165,7 @@ void Run(const RunArgs& a) {
     ms.push_back(r.time_ms);
   }
   std::string line = fmt::format("frames={} tracked={} lost={} keyframes={} pose_ms_median={:.3f} fps={:.1f}",
-                                 results.size(), tracked + 1, lost, keyframes, Median(ms), results.size() / wall_s);
+                                 results.size(), tracked + 1, lost, keyframes, UpperMedian(ms), results.size() / wall_s);
   if (!input.groundtruth.empty() && traj.size() >= 3) {
     // The map is the ground truth's, so the estimate is in its frame already: no alignment.
     eval::EvalOptions eo;

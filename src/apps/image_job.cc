@@ -22,6 +22,7 @@
 
 #include "apps/options.h"
 #include "apps/slam_job.h"
+#include "core/median.h"
 #include "eval/trajectory_eval.h"
 #include "frontend/to_observations.h"
 #include "io/datasets.h"
@@ -85,11 +86,9 @@ nlohmann::json StageJson(const Stage& s) {
     j["median_ms"] = nullptr, j["mean_ms"] = nullptr;
     return j;
   }
-  std::vector<double> v = s.ms;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   double sum = 0;
   for (double x : s.ms) sum += x;
-  j["median_ms"] = v[v.size() / 2];
+  j["median_ms"] = UpperMedian(s.ms);
   j["mean_ms"] = sum / static_cast<double>(s.ms.size());
   return j;
 }
@@ -155,13 +154,11 @@ class Overlay {
     for (int a = 0; a < 3; ++a) {
       std::vector<double> c;
       for (const Eigen::Vector3d& p : points) c.push_back(p[a]);
-      std::nth_element(c.begin(), c.begin() + c.size() / 2, c.end());
-      centre[a] = c[c.size() / 2];
+      centre[a] = UpperMedian(std::move(c));
     }
     std::vector<double> d;
     for (const Eigen::Vector3d& p : points) d.push_back((p - centre).norm());
-    std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-    const double half = 0.15 * d[d.size() / 2];
+    const double half = 0.15 * UpperMedian(std::move(d));
     for (int i = 0; i < 8; ++i)
       corners_[i] = centre + half * Eigen::Vector3d(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
     anchored_ = true;

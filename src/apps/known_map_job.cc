@@ -73,11 +73,7 @@ std::vector<slam::FrameResult> RunKnownMap(const KnownMapInput& input, const sla
   if (input.frames.empty()) throw std::runtime_error("no frames to track");
   // The first pose is given, as in the paper's precision test: the ground-truth pose of the first frame.
   const double t0 = input.frames.front().stamp_s;
-  int best = -1;
-  for (size_t i = 0; i < input.groundtruth.size(); ++i)
-    if (std::abs(input.groundtruth.stamps_s[i] - t0) <= 1e-3 &&
-        (best < 0 || std::abs(input.groundtruth.stamps_s[i] - t0) < std::abs(input.groundtruth.stamps_s[best] - t0)))
-      best = static_cast<int>(i);
+  const int best = io::NearestStampIndex(input.groundtruth, t0, 1e-3);
   if (best < 0)
     throw std::runtime_error(fmt::format(
         "known-map tracking needs the pose of the first frame (t = {:.6f} s) in the ground truth, and none is within 1 ms",

@@ -48,15 +48,8 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
 
 std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& gt) {
   return [&gt](double a, double b) -> std::optional<double> {
-    auto nearest = [&gt](double t) -> int {
-      int best = -1;
-      for (size_t i = 0; i < gt.size(); ++i)
-        if (std::abs(gt.stamps_s[i] - t) <= 0.02 &&  // the association tolerance of the evaluation
-            (best < 0 || std::abs(gt.stamps_s[i] - t) < std::abs(gt.stamps_s[best] - t)))
-          best = static_cast<int>(i);
-      return best;
-    };
-    const int i = nearest(a), j = nearest(b);
+    // 20 ms: the association tolerance of the evaluation.
+    const int i = io::NearestStampIndex(gt, a, 0.02), j = io::NearestStampIndex(gt, b, 0.02);
     if (i < 0 || j < 0) return std::nullopt;
     return (gt.world_from_cam[i].t - gt.world_from_cam[j].t).norm();
   };

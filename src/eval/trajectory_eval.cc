@@ -7,6 +7,7 @@
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #endif
 #include "eval/trajectory_eval.h"
+#include "core/median.h"
 
 #include <algorithm>
 #include <cctype>
@@ -196,11 +197,7 @@ ErrorStats ComputeStats(std::vector<double> errors) {
   s.mean = sum / n;
   s.rmse = std::sqrt(sum_sq / n);
   s.max = *std::max_element(errors.begin(), errors.end());
-  const size_t mid = errors.size() / 2;
-  std::nth_element(errors.begin(), errors.begin() + static_cast<std::ptrdiff_t>(mid), errors.end());
-  s.median = errors[mid];
-  if (errors.size() % 2 == 0)  // mean of the two middle values
-    s.median = 0.5 * (s.median + *std::max_element(errors.begin(), errors.begin() + static_cast<std::ptrdiff_t>(mid)));
+  s.median = Median(std::move(errors));
   return s;
 }
 

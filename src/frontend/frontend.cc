@@ -1,4 +1,5 @@
 #include "frontend/frontend.h"
+#include "core/median.h"
 
 #include <fmt/format.h>
 #include <tbb/task_group.h>
@@ -248,11 +249,7 @@ struct Frontend::Impl {
       }
     }
     if (vu.empty()) return {Eigen::Vector2d::Zero(), kVelocitySigmaUnknownPx};
-    auto median = [](std::vector<double>& v) {
-      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-      return v[v.size() / 2];
-    };
-    return {Eigen::Vector2d(median(vu), median(vv)), kVelocitySigmaFromNeighboursPx};
+    return {Eigen::Vector2d(UpperMedian(vu), UpperMedian(vv)), kVelocitySigmaFromNeighboursPx};
   }
 
   void TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameResult* result);

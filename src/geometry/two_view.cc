@@ -1,5 +1,7 @@
 #include "geometry/two_view.h"
 
+#include "core/median.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -304,15 +306,6 @@ double HomographyInlierRatio(std::span<const Eigen::Vector2d> uv1, std::span<con
       ++count;
   }
   return static_cast<double>(count) / static_cast<double>(idx.size());
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  if (v.size() % 2 == 1) return v[mid];
-  const double upper = v[mid];
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + mid));
 }
 
 }  // namespace

@@ -272,4 +272,13 @@ void WriteEuroc(const std::string& path, const Trajectory& traj) {
   detail::FinishWrite(out, path);
 }
 
+int NearestStampIndex(const Trajectory& traj, double t, double max_dt_s) {
+  int best = -1;
+  for (size_t i = 0; i < traj.stamps_s.size(); ++i)
+    if (std::abs(traj.stamps_s[i] - t) <= max_dt_s &&
+        (best < 0 || std::abs(traj.stamps_s[i] - t) < std::abs(traj.stamps_s[best] - t)))
+      best = static_cast<int>(i);
+  return best;
+}
+
 }  // namespace mcslam::io

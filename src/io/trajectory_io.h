@@ -19,6 +19,10 @@ struct Trajectory {
   bool empty() const { return world_from_cam.empty(); }
 };
 
+// Index of the pose whose stamp is nearest to t, if within max_dt_s (the first of equally near ones);
+// -1 when no pose is that near.
+int NearestStampIndex(const Trajectory& traj, double t, double max_dt_s);
+
 // Parses "tum" | "kitti" | "euroc" | "auto"; throws std::invalid_argument naming the value.
 TrajectoryFormat ParseTrajectoryFormat(const std::string& name);
 std::string ToString(TrajectoryFormat f);

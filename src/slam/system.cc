@@ -10,6 +10,7 @@
 #include <Eigen/Dense>
 #include <fmt/format.h>
 
+#include "core/median.h"
 #include "geometry/bundle_adjust.h"
 #include "geometry/pnp.h"
 #include "geometry/triangulation.h"
@@ -21,13 +22,6 @@ namespace {
 
 double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + m, v.end());
-  return v[m];
 }
 
 void Fail(const std::string& what) { throw std::invalid_argument(what); }
@@ -96,6 +90,7 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
                std::unique_ptr<compute::PoseKernel> pose_kernel, std::unique_ptr<compute::PointKernel> point_kernel)
     : camera_(camera),
       ideal_(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
+      focal_px_(0.5 * (camera.fx + camera.fy)),
       options_(options),
       pose_kernel_(std::move(pose_kernel)),
       point_kernel_(std::move(point_kernel)),
@@ -170,7 +165,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     reference_slot_ = cur_slot;
     return note(fmt::format("only {} features shared with the reference: new reference", ids.size()));
   }
-  const double med_disp = Median(disp);
+  const double med_disp = UpperMedian(disp);
   if (med_disp < io.min_median_displacement_px)
     return note(fmt::format("median displacement {:.1f} px < {:.1f} px", med_disp, io.min_median_displacement_px));
 
@@ -188,7 +183,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   };
   std::vector<int> window;
   for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
-  const double focal = 0.5 * (camera_.fx + camera_.fy);
+  const double focal = focal_px_;
   std::optional<Hypothesis> best;
   std::string last_failure;
   const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
@@ -261,7 +256,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       const Eigen::Vector3d p = h.poses[o.camera] * h.points[o.point];
       res.push_back(p.z() > 0 ? focal * (p.head<2>() / p.z() - o.uv_norm).norm() : 1e9);
     }
-    h.median_px = Median(res);
+    h.median_px = UpperMedian(res);
     // The refined window must still have the parallax asked for (between the first and the last camera).
     std::vector<double> parallax;
     const Eigen::Vector3d c0 = h.poses.front().OriginOfTargetInSource(), c1 = h.poses.back().OriginOfTargetInSource();
@@ -269,10 +264,10 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       const Eigen::Vector3d a = (X - c0).normalized(), b = (X - c1).normalized();
       parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
     }
-    const double refined_parallax = Median(parallax);
+    const double refined_parallax = UpperMedian(parallax);
     std::vector<double> z;
     for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
-    if (!(Median(z) > 0)) {
+    if (!(UpperMedian(z) > 0)) {
       last_failure = "refined window: the points ended behind the reference camera";
       continue;
     }
@@ -327,7 +322,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
                   (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
     }
   PoseTrackerOptions topts = options_.tracker;
-  topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * Median(depths);
+  topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
   tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
   initialised_ = true;
 
@@ -439,7 +434,7 @@ int System::TriangulateNewPoints(int slot) {
   const FrameRecord& cur = map_.frames[slot];
   geometry::TriangulationOptions to;
   to.max_reprojection_px = mo.max_reprojection_px;
-  to.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  to.focal_px = focal_px_;
   to.min_parallax_deg = mo.min_parallax_deg;
   int added = 0;
   for (const FeatureUndistorted& f : cur.features) {
@@ -517,7 +512,7 @@ PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, s
   for (const PointObservation& o : obs) P.push_back(o.point_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_undistorted_px));
   est.scored = static_cast<int>(P.size());
   geometry::PnpOptions po;
-  po.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  po.focal_px = focal_px_;
   po.threshold_px = options_.tracker.inlier_threshold_px;
   po.min_inliers = options_.tracker.min_inliers;
   const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
@@ -579,7 +574,7 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
     }
   if (pts.empty()) return;
   geometry::BundleAdjustOptions bo;
-  bo.focal_px = 0.5 * (camera_.fx + camera_.fy);
+  bo.focal_px = focal_px_;
   bo.huber_px = options_.init.refine_huber_px;
   bo.max_iterations = options_.ba_iterations;
   bo.cauchy = true;  // wrong matches of tens of pixels must stop pulling (Huber's pull never fades)
@@ -593,7 +588,7 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   const FrameRecord& cur = map_.frames[slot];
   for (size_t i = 0; i < pts.size(); ++i) {
     pts[i]->position_in_world = X[i];
-    if (residuals[i].size() >= 3 && Median(residuals[i]) > mo.adjust_threshold_px) {
+    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > mo.adjust_threshold_px) {
       pts[i]->state = PointState::kRemoved;
       pts[i]->removed_frame = cur.index;
       ++r->removed;
@@ -627,7 +622,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
       Eigen::Vector2d uv;
       d.push_back(ideal_.ProjectWorld(map_.frames[window[w]].cam_from_world, X, &uv) ? (uv - uv_obs).norm() : 1e9);
     }
-    return Median(d);
+    return UpperMedian(d);
   };
 
   // Candidates: points seen in this keyframe whose residual is above the threshold.
@@ -734,7 +729,7 @@ void System::ResidualStats(int slot, FrameReport* r) const {
     if (d < options_.tracker.inlier_threshold_px) sum += d, ++n;
   }
   r->reproj_mean_px = n > 0 ? sum / n : 0.0;
-  r->reproj_median_px = Median(all);
+  r->reproj_median_px = UpperMedian(all);
 }
 
 }  // namespace mcslam::slam

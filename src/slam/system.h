@@ -137,6 +137,7 @@ class System {
 
   PinholeCamera camera_;
   PinholeCamera ideal_;  // same intrinsics, no distortion: observations are undistorted on arrival
+  double focal_px_;      // mean focal length: converts pixel thresholds to normalised units
   SystemOptions options_;
   std::unique_ptr<compute::PoseKernel> pose_kernel_;
   std::unique_ptr<compute::PointKernel> point_kernel_;

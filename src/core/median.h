@@ -1,0 +1,25 @@
+#pragma once
+// Medians of small sets of numbers (residuals, timings, depths). Both return 0 for an empty set.
+#include <algorithm>
+#include <vector>
+
+namespace mcslam {
+
+// The element of rank n/2 (the upper of the two middle ones when n is even): always a value of the set.
+inline double UpperMedian(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
+  return v[mid];
+}
+
+// The median proper: the mean of the two middle values when n is even.
+inline double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
+  if (v.size() % 2 == 1) return v[mid];
+  return 0.5 * (v[mid] + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid)));
+}
+
+}  // namespace mcslam
