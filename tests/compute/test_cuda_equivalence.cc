@@ -167,24 +167,14 @@ TEST(CudaHost, TableKeyChangesWhenTheTableChangesAndOnlyThen) {
   EXPECT_EQ(cuda::MakeNormalTableKey(NormalTable()).count, 0);
 }
 
-// Five cameras on an arc looking at the origin from 3 m (as tests/compute/test_point_kernel.cc), and
-// `num_points` points near the origin seen by a varying number of them (point p by p % 6 cameras: some by
-// none), observed 1-2 px off, with centres a few cm from the truth.
-struct PointScene {
-  std::vector<ScaledPose> poses;
-  PoseScoringParams params;
+// The fixture's five cameras on an arc looking at the origin from 3 m, and `num_points` points near the
+// origin seen by a varying number of them (point p by p % 6 cameras: some by none), observed 1-2 px off,
+// with centres a few cm from the truth.
+struct PointScene : ArcCameras {
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
   std::vector<int> begin{0}, pose_idx;
 
   explicit PointScene(int num_points, int first_obs = 0) {
-    params.fx = params.fy = 500.0f;
-    params.max_distance_px = 50.0f;
-    for (int i = 0; i < 5; ++i) {
-      const float a = 0.03f * (i - 2);
-      const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
-      const float t[3] = {0.0f, 0.0f, 3.0f};
-      poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
-    }
     // Observations before first_obs belong to no point: obs_begin need not start at 0.
     for (int o = 0; o < first_obs; ++o) pose_idx.push_back(0), ou.push_back(0), ov.push_back(0);
     begin[0] = first_obs;

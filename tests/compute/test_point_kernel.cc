@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "compute/point_kernel.h"
+#include "compute/pose_fixture.h"
 
 namespace mcslam::compute {
 namespace {
@@ -14,22 +15,8 @@ constexpr double kRel = 1e-4;  // hardware rsqrt estimate, |rel err| < 2^-14, pl
 constexpr double kRel = 5e-4;  // AVX rsqrt estimate, |rel err| < 1.5 * 2^-12
 #endif
 
-// Five cameras on a 40 cm arc looking at the origin from ~3 m, and points near the origin.
-struct Scene {
-  std::vector<ScaledPose> poses;
-  std::vector<float> pose_q[5], pose_t[5];
-  PoseScoringParams params;
-  Scene() {
-    params.fx = params.fy = 500.0f;
-    params.max_distance_px = 50.0f;
-    for (int i = 0; i < 5; ++i) {
-      // cam_from_world: rotation about y by a small angle, camera 3 m in front of the origin.
-      const float a = 0.03f * (i - 2);
-      const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
-      const float t[3] = {0.0f, 0.0f, 3.0f};
-      poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
-    }
-  }
+// The fixture's five cameras on an arc around the origin, and points near the origin.
+struct Scene : ArcCameras {
   // Observation (undistorted px minus principal point) of a world point in camera k.
   void Observe(int k, const float X[3], float* u, float* v) const {
     const ScaledPose& p = poses[k];

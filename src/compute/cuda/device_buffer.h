@@ -13,13 +13,24 @@ namespace mcslam::compute::cuda {
 // Growth policy shared by both buffer kinds: the new capacity for a request of n elements.
 inline size_t GrownCapacity(size_t capacity, size_t n) { return std::max(n, capacity + capacity / 2); }
 
-template <typename T>
-class DeviceBuffer {
+// Where a buffer lives: device memory, or page-locked host memory (the source and target of asynchronous
+// copies). The check sits here so that an error names the real call.
+struct DeviceMemory {
+  static void Allocate(void** p, size_t bytes) { MCSLAM_CUDA_CHECK(cudaMalloc(p, bytes)); }
+  static void Free(void* p) noexcept { cudaFree(p); }  // a destructor path: nothing useful to do with an error
+};
+struct PinnedMemory {
+  static void Allocate(void** p, size_t bytes) { MCSLAM_CUDA_CHECK(cudaMallocHost(p, bytes)); }
+  static void Free(void* p) noexcept { cudaFreeHost(p); }
+};
+
+template <typename T, typename Memory>
+class Buffer {
  public:
-  DeviceBuffer() = default;
-  DeviceBuffer(const DeviceBuffer&) = delete;
-  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  ~DeviceBuffer() { Release(); }
+  Buffer() = default;
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+  ~Buffer() { Release(); }
 
   // At least n elements (contents are not kept when it grows). n == 0 returns the current pointer,
   // which may be null.
@@ -27,7 +38,7 @@ class DeviceBuffer {
     if (n > capacity_) {
       const size_t c = GrownCapacity(capacity_, n);
       Release();
-      MCSLAM_CUDA_CHECK(cudaMalloc(reinterpret_cast<void**>(&ptr_), c * sizeof(T)));
+      Memory::Allocate(reinterpret_cast<void**>(&ptr_), c * sizeof(T));
       capacity_ = c;
       ++allocations_;
     }
@@ -37,7 +48,7 @@ class DeviceBuffer {
   size_t capacity() const { return capacity_; }
   long allocations() const { return allocations_; }
   void Release() noexcept {
-    if (ptr_ != nullptr) cudaFree(ptr_);  // a destructor path: nothing useful to do with an error here
+    if (ptr_ != nullptr) Memory::Free(ptr_);
     ptr_ = nullptr;
     capacity_ = 0;
   }
@@ -48,39 +59,10 @@ class DeviceBuffer {
   long allocations_ = 0;
 };
 
-// Page-locked host memory: the source and target of asynchronous copies.
 template <typename T>
-class PinnedBuffer {
- public:
-  PinnedBuffer() = default;
-  PinnedBuffer(const PinnedBuffer&) = delete;
-  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-  ~PinnedBuffer() { Release(); }
-
-  T* Reserve(size_t n) {
-    if (n > capacity_) {
-      const size_t c = GrownCapacity(capacity_, n);
-      Release();
-      MCSLAM_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&ptr_), c * sizeof(T)));
-      capacity_ = c;
-      ++allocations_;
-    }
-    return ptr_;
-  }
-  T* get() const { return ptr_; }
-  size_t capacity() const { return capacity_; }
-  long allocations() const { return allocations_; }
-  void Release() noexcept {
-    if (ptr_ != nullptr) cudaFreeHost(ptr_);
-    ptr_ = nullptr;
-    capacity_ = 0;
-  }
-
- private:
-  T* ptr_ = nullptr;
-  size_t capacity_ = 0;
-  long allocations_ = 0;
-};
+using DeviceBuffer = Buffer<T, DeviceMemory>;
+template <typename T>
+using PinnedBuffer = Buffer<T, PinnedMemory>;
 
 class Stream {
  public:
