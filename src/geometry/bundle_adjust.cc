@@ -1,6 +1,7 @@
 #include "geometry/bundle_adjust.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include <ceres/ceres.h>
@@ -15,6 +16,13 @@ void BundleAdjustOptions::Check() const {
   if (max_iterations < 1)
     throw std::invalid_argument(fmt::format("bundle adjustment: max_iterations must be >= 1, got {}", max_iterations));
   if (num_threads < 1) throw std::invalid_argument(fmt::format("bundle adjustment: num_threads must be >= 1, got {}", num_threads));
+}
+
+double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
+                           const Eigen::Vector2d& uv_norm, double focal_px) {
+  const Eigen::Vector3d p = cam_from_world * point_in_world;
+  if (!(p.z() > 1e-9)) return std::numeric_limits<double>::infinity();
+  return focal_px * (p.head<2>() / p.z() - uv_norm).norm();
 }
 
 namespace {
@@ -40,9 +48,8 @@ double RmsPx(const std::vector<Pose>& cams, const std::vector<Eigen::Vector3d>& 
              const std::vector<BundleObservation>& obs, double focal) {
   double s = 0;
   for (const BundleObservation& o : obs) {
-    const Eigen::Vector3d p = cams[o.camera] * pts[o.point];
-    if (!(p.z() > 1e-9)) continue;  // behind the camera: no pixel residual exists
-    s += (focal * (p.head<2>() / p.z() - o.uv_norm)).squaredNorm();
+    const double e = ReprojectionErrorPx(cams[o.camera], pts[o.point], o.uv_norm, focal);
+    if (std::isfinite(e)) s += e * e;  // behind the camera: no pixel residual exists
   }
   return obs.empty() ? 0.0 : std::sqrt(s / obs.size());
 }

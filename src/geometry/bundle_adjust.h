@@ -36,6 +36,11 @@ struct BundleAdjustSummary {
   std::string report;                           // Ceres' brief report
 };
 
+// Reprojection error in pixels of a point seen at uv_norm (normalised) by a camera; +infinity when the
+// point is not in front of it.
+double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
+                           const Eigen::Vector2d& uv_norm, double focal_px);
+
 // Adjusts cam_from_world (except those with fixed[i] = true) and points_in_world in place.
 BundleAdjustSummary BundleAdjust(std::vector<Pose>& cam_from_world, std::vector<Eigen::Vector3d>& points_in_world,
                                  const std::vector<BundleObservation>& observations, const std::vector<bool>& fixed,

@@ -252,10 +252,8 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     bo.huber_px = io.refine_huber_px;
     if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
     std::vector<double> res;
-    for (const geometry::BundleObservation& o : obs) {
-      const Eigen::Vector3d p = h.poses[o.camera] * h.points[o.point];
-      res.push_back(p.z() > 0 ? focal * (p.head<2>() / p.z() - o.uv_norm).norm() : 1e9);
-    }
+    for (const geometry::BundleObservation& o : obs)
+      res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
     h.median_px = UpperMedian(res);
     // The refined window must still have the parallax asked for (between the first and the last camera).
     std::vector<double> parallax;
@@ -581,10 +579,8 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   geometry::BundleAdjust(cams, X, obs, fixed, bo);
   for (size_t w = 0; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
   std::vector<std::vector<double>> residuals(pts.size());
-  for (const geometry::BundleObservation& o : obs) {
-    const Eigen::Vector3d pc = cams[o.camera] * X[o.point];
-    residuals[o.point].push_back(pc.z() > 0 ? bo.focal_px * (pc.head<2>() / pc.z() - o.uv_norm).norm() : 1e9);
-  }
+  for (const geometry::BundleObservation& o : obs)
+    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], X[o.point], o.uv_norm, bo.focal_px));
   const FrameRecord& cur = map_.frames[slot];
   for (size_t i = 0; i < pts.size(); ++i) {
     pts[i]->position_in_world = X[i];
