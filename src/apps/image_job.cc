@@ -492,8 +492,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
 
   InstallInterruptHandler();
   std::vector<FrameRow> rows;
-  std::vector<slam::FrameReport> reports;
-  std::map<int64_t, size_t> report_of_index;
+  ReportLog log;
+  std::vector<slam::FrameReport>& reports = log.reports;
+  const std::map<int64_t, size_t>& report_of_index = log.index_of_frame;
   std::unordered_map<int64_t, frontend::Descriptor> lost_descriptors;  // map points whose track ended
   std::optional<Pose> latest_cam_from_world;
   std::optional<int64_t> init_frame;
@@ -580,14 +581,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
       ++frames_processed;
       const slam::FrameReport* current = nullptr;
       for (const slam::FrameReport& r : out_reports) {
-        auto it = report_of_index.find(r.index);
-        if (it == report_of_index.end()) {
-          report_of_index[r.index] = reports.size();
-          reports.push_back(r);
-        } else {
-          tracked -= reports[it->second].status == slam::FrameStatus::kTracked;
-          lost -= reports[it->second].status == slam::FrameStatus::kLost;
-          reports[it->second] = r;  // the initialisation resolves frames reported as waiting before
+        if (const std::optional<slam::FrameStatus> replaced = log.Put(r)) {
+          tracked -= *replaced == slam::FrameStatus::kTracked;
+          lost -= *replaced == slam::FrameStatus::kLost;
         }
         tracked += r.status == slam::FrameStatus::kTracked;
         lost += r.status == slam::FrameStatus::kLost;

@@ -21,21 +21,16 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
     system.SetBaselineOracle(BaselineOracle(input.groundtruth));
   }
   SlamRunResult res;
-  std::map<int64_t, size_t> slot_of_index;
+  ReportLog log;
   const auto t0 = std::chrono::steady_clock::now();
   for (const slam::FrameObservations& f : input.frames) {
     if (stop && stop()) break;
     for (const slam::FrameReport& r : system.Process(f)) {
-      auto it = slot_of_index.find(r.index);
-      if (it == slot_of_index.end()) {
-        slot_of_index[r.index] = res.reports.size();
-        res.reports.push_back(r);
-      } else {
-        res.reports[it->second] = r;  // initialisation resolves frames reported as waiting before
-      }
+      log.Put(r);
       if (on_frame) on_frame(r);
     }
   }
+  res.reports = std::move(log.reports);
   res.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   res.initialised = system.initialised();
   for (const slam::MapPoint& p : system.map().points()) {
@@ -44,6 +39,17 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
     res.map.ids.push_back(p.id);
   }
   return res;
+}
+
+std::optional<slam::FrameStatus> ReportLog::Put(const slam::FrameReport& r) {
+  const auto [it, added] = index_of_frame.try_emplace(r.index, reports.size());
+  if (added) {
+    reports.push_back(r);
+    return std::nullopt;
+  }
+  const slam::FrameStatus replaced = reports[it->second].status;
+  reports[it->second] = r;
+  return replaced;
 }
 
 std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& gt) {

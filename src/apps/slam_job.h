@@ -2,6 +2,7 @@
 // The full SLAM job on a folder of observations: the System of the slam layer over every frame, and the
 // outputs users keep (trajectories, map, per-frame CSV with errors when the ground truth is known).
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -12,6 +13,15 @@
 #include "slam/system.h"
 
 namespace mcslam::apps {
+
+// The final report of every frame, in frame order: a later report of the same frame (the initialisation
+// resolving frames first reported as waiting) replaces the earlier one.
+struct ReportLog {
+  std::vector<slam::FrameReport> reports;
+  std::map<int64_t, size_t> index_of_frame;  // frame index -> position in reports
+  // Adds r, or replaces the report of its frame; returns the replaced report's status when it replaced one.
+  std::optional<slam::FrameStatus> Put(const slam::FrameReport& r);
+};
 
 struct SlamRunResult {
   std::vector<slam::FrameReport> reports;  // one per frame, in order (the final report of each)
