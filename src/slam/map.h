@@ -24,9 +24,7 @@ struct MapPoint {
   Eigen::Vector3d position_in_world = Eigen::Vector3d::Zero();
   PointState state = PointState::kActive;
   bool inlier = true;        // inlier at the last estimated pose: only these score the next pose (§5.2)
-  int64_t created_frame = 0;
   int64_t last_seen_frame = 0;
-  int adjustments = 0;       // times the Monte Carlo adjustment moved it
   int64_t removed_frame = -1;  // when it was last removed
 };
 
@@ -41,7 +39,6 @@ struct FrameRecord {
   std::vector<FeatureUndistorted> features;  // sorted by id
   bool has_pose = false;
   Pose cam_from_world;
-  bool keyframe = false;
 
   const FeatureUndistorted* Find(int64_t id) const {
     auto it = std::lower_bound(features.begin(), features.end(), id,

@@ -298,7 +298,6 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     MapPoint p;
     p.id = best->point_ids[i];
     p.position_in_world = best->points[i] * s;
-    p.created_frame = cur.index;
     p.last_seen_frame = cur.index;
     map_.Add(p);
     depths.push_back(p.position_in_world.z());
@@ -308,7 +307,6 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     f.has_pose = true;
     f.cam_from_world = best->poses[w];
     f.cam_from_world.t *= s;
-    f.keyframe = true;
     map_.keyframes.push_back(window[w]);
   }
   last_posed_slot_ = cur_slot;
@@ -393,7 +391,6 @@ FrameReport System::TrackFrame(int slot) {
   r.cam_from_world = est.cam_from_world;
   r.smoothed_cam_from_world = smoother_.Update(est.cam_from_world);
   if (est.keyframe) {
-    fr.keyframe = true;
     map_.keyframes.push_back(slot);
     r.keyframe = true;
     const auto t1 = std::chrono::steady_clock::now();
@@ -482,7 +479,6 @@ int System::TriangulateNewPoints(int slot) {
     MapPoint p;
     p.id = f.id;
     p.position_in_world = t.point_in_world;
-    p.created_frame = cur.index;
     p.last_seen_frame = cur.index;
     if (existing)
       *existing = p;
@@ -697,7 +693,6 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     const double after = best[p].index >= 0 ? median_residual(cand_views[p], X) : before_residual[p];
     if (after < before_residual[p] && after < mo.adjust_threshold_px) {
       cand[p]->position_in_world = X;
-      ++cand[p]->adjustments;
       ++r->adjusted;
     } else if (before_residual[p] < mo.adjust_threshold_px) {
       // A candidate below the outlier threshold that no sample improves stays as it is.
