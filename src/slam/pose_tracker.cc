@@ -36,7 +36,10 @@ void PoseTrackerOptions::Check() const {
 
 PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& options,
                          std::unique_ptr<compute::PoseKernel> kernel)
-    : camera_(camera), options_(options), kernel_(std::move(kernel)) {
+    : camera_(camera),
+      ideal_(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
+      options_(options),
+      kernel_(std::move(kernel)) {
   camera_.Check();
   options_.Check();
   if (!kernel_) throw std::invalid_argument("pose tracker: no compute kernel");
@@ -48,12 +51,11 @@ int PoseTracker::ClassifyInliers(const Pose& cam_from_world, const std::vector<P
   residuals->assign(obs.size(), 0.0);
   inliers->assign(obs.size(), 0);
   // Residuals in the ideal pinhole (the observations are undistorted): the same distance the kernel scores.
-  const PinholeCamera ideal(camera_.fx, camera_.fy, camera_.cx, camera_.cy, camera_.width, camera_.height);
   int count = 0;
   for (size_t i = 0; i < obs.size(); ++i) {
     Eigen::Vector2d uv;
     double r = std::numeric_limits<double>::infinity();
-    if (ideal.ProjectWorld(cam_from_world, obs[i].point_in_world, &uv)) r = (uv - obs[i].uv_undistorted_px).norm();
+    if (ideal_.ProjectWorld(cam_from_world, obs[i].point_in_world, &uv)) r = (uv - obs[i].uv_undistorted_px).norm();
     (*residuals)[i] = r;
     (*inliers)[i] = r < options_.inlier_threshold_px;
     count += (*inliers)[i];
@@ -65,7 +67,6 @@ Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::
   // Eqs. 3-5: the translation change that moves the projections of the map the way the features moved,
   // least squares over all scoring points (stacked Jacobians, not only the centroid), with a few
   // iteratively reweighted (Huber) passes so that wrong matches do not drag it.
-  const PinholeCamera ideal(camera_.fx, camera_.fy, camera_.cx, camera_.cy, camera_.width, camera_.height);
   Eigen::Vector3d dt = Eigen::Vector3d::Zero();
   const double huber = 3.0 * options_.inlier_threshold_px;
   for (int iter = 0; iter < 3; ++iter) {
@@ -76,7 +77,7 @@ Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::
       if (!o.was_inlier) continue;
       Eigen::Vector2d uv;
       Eigen::Matrix<double, 2, 3> Jt;
-      if (!ideal.ProjectWorld(prev, o.point_in_world, &uv, nullptr, &Jt)) continue;
+      if (!ideal_.ProjectWorld(prev, o.point_in_world, &uv, nullptr, &Jt)) continue;
       const Eigen::Vector2d r = o.uv_undistorted_px - uv;
       const double e = (r - Jt * dt).norm();
       const double w = e <= huber ? 1.0 : huber / e;

@@ -89,6 +89,7 @@ class PoseTracker {
 
  private:
   PinholeCamera camera_;
+  PinholeCamera ideal_;  // same intrinsics, no distortion: the observations arrive undistorted
   PoseTrackerOptions options_;
   std::unique_ptr<compute::PoseKernel> kernel_;
   compute::NormalTable table_;
