@@ -213,6 +213,11 @@ void RegisterRun(CLI::App& app) {
                   "Median parallax the initialisation needs (two views and the refined window)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--settle-parallax-deg", args->system.init.settle_parallax_deg,
+                  "After initialisation, the frames since the reference and the map are refined together (bundle "
+                  "adjustment) each time their median parallax grows by half, until it reaches this (0: never)")
+      ->check(CLI::Range(0.0, 89.0))
+      ->capture_default_str();
   cmd->add_option("--samples", args->system.mapping.samples, "Monte Carlo samples per adjusted point")
       ->check(CLI::Range(1, 1 << 22))
       ->capture_default_str();

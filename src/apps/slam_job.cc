@@ -47,8 +47,15 @@ std::optional<slam::FrameStatus> ReportLog::Put(const slam::FrameReport& r) {
     reports.push_back(r);
     return std::nullopt;
   }
-  const slam::FrameStatus replaced = reports[it->second].status;
-  reports[it->second] = r;
+  slam::FrameReport& old = reports[it->second];
+  const slam::FrameStatus replaced = old.status;
+  if (r.pose_update && old.has_pose) {  // a corrected pose: the rest of the frame's report stands
+    old.cam_from_world = r.cam_from_world;
+    old.reproj_mean_px = r.reproj_mean_px;
+    old.reproj_median_px = r.reproj_median_px;
+    return replaced;
+  }
+  old = r;
   return replaced;
 }
 

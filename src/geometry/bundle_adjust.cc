@@ -90,7 +90,7 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
     }
   }
   ceres::Solver::Options so;
-  so.linear_solver_type = ceres::SPARSE_SCHUR;
+  so.linear_solver_type = options.dense_schur ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   so.max_num_iterations = options.max_iterations;
   so.num_threads = options.num_threads;
   so.logging_type = ceres::SILENT;

@@ -26,6 +26,9 @@ struct BundleAdjustOptions {
   bool cauchy = false;
   int max_iterations = 50;
   int num_threads = 1;
+  // Dense Schur complement: faster where the cameras are few (tens) and most see most points, as in the
+  // start of a sequence; sparse (the default) where each camera sees a small part of the map.
+  bool dense_schur = false;
   void Check() const;            // throws std::invalid_argument naming the bad field
 };
 

@@ -56,6 +56,10 @@ void InitOptions::Check() const {
   if (min_points < 3) Fail(fmt::format("init: min_points must be >= 3, got {}", min_points));
   if (!(min_median_parallax_deg >= 0)) Fail(fmt::format("init: min_median_parallax_deg must be >= 0, got {}", min_median_parallax_deg));
   if (!(ransac_threshold_px > 0)) Fail(fmt::format("init: ransac_threshold_px must be > 0, got {}", ransac_threshold_px));
+  if (!(settle_parallax_deg >= 0 && settle_parallax_deg < 90))
+    Fail(fmt::format("init: settle_parallax_deg must be in [0, 90), got {}", settle_parallax_deg));
+  if (settle_max_frames < 3) Fail(fmt::format("init: settle_max_frames must be >= 3, got {}", settle_max_frames));
+  if (!(settle_step > 1)) Fail(fmt::format("init: settle_step must be > 1, got {}", settle_step));
 }
 
 void MappingOptions::Check() const {
@@ -132,7 +136,150 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     return out;
   }
   out.push_back(TrackFrame(slot));
+  if (settling_ && out.front().status == FrameStatus::kTracked &&
+      ParallaxFromReference(slot) >= next_settle_parallax_deg_) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Settle(slot, &out);
+    out.front().init_ms = Ms(t0);
+  }
   return out;
+}
+
+System::WindowPoints System::CollectWindowPoints(const std::vector<int>& window) {
+  WindowPoints wp;
+  std::unordered_map<int64_t, int> count, index;
+  for (int s : window)
+    for (const FeatureUndistorted& f : map_.frames[s].features)
+      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
+  for (size_t w = 0; w < window.size(); ++w)
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
+      MapPoint* p = map_.Find(f.id);
+      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
+      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
+      if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world);
+      wp.obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
+    }
+  return wp;
+}
+
+int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index) {
+  std::vector<std::vector<double>> residuals(wp.pts.size());
+  for (const geometry::BundleObservation& o : wp.obs)
+    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], wp.X[o.point], o.uv_norm, focal_px_));
+  int removed = 0;
+  for (size_t i = 0; i < wp.pts.size(); ++i) {
+    wp.pts[i]->position_in_world = wp.X[i];
+    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > options_.mapping.adjust_threshold_px) {
+      wp.pts[i]->state = PointState::kRemoved;
+      wp.pts[i]->removed_frame = frame_index;
+      ++removed;
+    }
+  }
+  return removed;
+}
+
+double System::ParallaxFromReference(int slot) const {
+  const FrameRecord& ref = map_.frames[reference_slot_];
+  const FrameRecord& cur = map_.frames[slot];
+  const Eigen::Vector3d c0 = ref.cam_from_world.OriginOfTargetInSource(), c1 = cur.cam_from_world.OriginOfTargetInSource();
+  std::vector<double> parallax;
+  for (const FeatureUndistorted& f : cur.features) {
+    const MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved || !ref.Find(f.id)) continue;
+    const Eigen::Vector3d a = (p->position_in_world - c0).normalized(), b = (p->position_in_world - c1).normalized();
+    parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
+  }
+  // Too few points shared with the reference to say: the view has moved on, as far as the start can tell.
+  if (parallax.size() < static_cast<size_t>(options_.init.min_points)) return std::numeric_limits<double>::infinity();
+  return UpperMedian(parallax);
+}
+
+void System::Settle(int slot, std::vector<FrameReport>* out) {
+  const InitOptions& io = options_.init;
+  const double parallax = ParallaxFromReference(slot);
+  // Posed frames since the reference (at most settle_max_frames, evenly spread, with the reference, the
+  // initialisation's frame and this one), and every map point seen at least twice among them.
+  std::vector<int> posed;
+  for (int s = reference_slot_; s <= slot; ++s)
+    if (map_.frames[s].has_pose) posed.push_back(s);
+  std::vector<int> window;
+  const int n = static_cast<int>(posed.size()), m = std::min(n, io.settle_max_frames);
+  for (int i = 0; i < m; ++i) window.push_back(posed[static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)]);
+  if (std::find(window.begin(), window.end(), init_slot_) == window.end()) window.push_back(init_slot_);
+  std::sort(window.begin(), window.end());
+  window.erase(std::unique(window.begin(), window.end()), window.end());
+  std::vector<Pose> cams;
+  for (int s : window) cams.push_back(map_.frames[s].cam_from_world);
+  WindowPoints wp = CollectWindowPoints(window);
+  std::vector<Eigen::Vector3d>& X = wp.X;
+  const std::vector<geometry::BundleObservation>& obs = wp.obs;
+  std::vector<bool> fixed(window.size(), false);
+  fixed.front() = true;  // the reference camera is the world
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal_px_;
+  bo.huber_px = io.refine_huber_px;
+  bo.cauchy = true;  // tens of frames of tracks hold wrong matches: their pull must fade
+  // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
+  // the same trajectory.
+  bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
+  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  // The scale: the initialisation's baseline keeps its length (1, or the ground truth's with --gt-scale).
+  const auto init_it = std::find(window.begin(), window.end(), init_slot_);
+  const double b = init_it == window.end()
+                       ? 0.0
+                       : (cams[init_it - window.begin()].OriginOfTargetInSource() - cams.front().OriginOfTargetInSource()).norm();
+  const double s = b > 1e-12 ? init_baseline_ / b : 1.0;
+  for (Pose& c : cams) c.t *= s;
+  for (Eigen::Vector3d& x : X) x *= s;
+  std::unordered_map<int, Pose> moved_by;  // window slot -> new * old^-1
+  for (size_t w = 0; w < window.size(); ++w) {
+    moved_by[window[w]] = cams[w] * map_.frames[window[w]].cam_from_world.Inverse();
+    map_.frames[window[w]].cam_from_world = cams[w];
+  }
+  const FrameRecord& cur = map_.frames[slot];
+  StoreAdjustedPoints(cams, wp, cur.index);
+  // The points' inlier flags at the moved current pose (they gate the next frame's score).
+  for (const FeatureUndistorted& f : cur.features)
+    if (MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) {
+      Eigen::Vector2d uv;
+      p->inlier = ideal_.ProjectWorld(cur.cam_from_world, p->position_in_world, &uv) &&
+                  (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
+    }
+  // The posed frames left out of the adjustment: each placed again against the adjusted points (PnP from
+  // the points it sees), or moved with its neighbour in the window when PnP cannot place it.
+  geometry::PnpOptions po;
+  po.focal_px = focal_px_;
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = options_.tracker.min_inliers;
+  for (int k : posed) {
+    if (std::binary_search(window.begin(), window.end(), k)) continue;
+    FrameRecord& f = map_.frames[k];
+    std::vector<Eigen::Vector3d> P;
+    std::vector<Eigen::Vector2d> uv;
+    for (const FeatureUndistorted& o : f.features)
+      if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
+        P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
+    if (const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po)) {
+      f.cam_from_world = *pose;
+    } else {
+      const int before = *(std::upper_bound(window.begin(), window.end(), k) - 1);
+      f.cam_from_world = moved_by[before] * f.cam_from_world;
+    }
+  }
+  const std::string note = fmt::format(
+      "{}: {} of {} frames and {} points refined together at a median parallax of {:.1f} deg",
+      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(), parallax);
+  settling_ = parallax < io.settle_parallax_deg;
+  next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
+  out->front().cam_from_world = cur.cam_from_world;
+  out->front().note = note;
+  ResidualStats(slot, &out->front());
+  for (int k : posed) {
+    if (k == slot) continue;
+    FrameReport r = PosedReport(k);
+    r.pose_update = true;
+    out->push_back(r);
+  }
 }
 
 bool System::TryInitialise(std::vector<FrameReport>* out) {
@@ -310,6 +457,10 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     map_.keyframes.push_back(window[w]);
   }
   last_posed_slot_ = cur_slot;
+  init_slot_ = cur_slot;
+  init_baseline_ = baseline;
+  settling_ = io.settle_parallax_deg > 0;
+  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view.median_parallax_deg, 1e-3);
   MarkSeen(cur_slot);
   for (const FeatureUndistorted& f : cur.features)
     if (MapPoint* p = map_.Find(f.id)) {
@@ -325,17 +476,10 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   out->clear();
   smoother_.Reset();
   for (size_t w = 0; w < window.size(); ++w) {
-    const FrameRecord& f = map_.frames[window[w]];
-    FrameReport r;
-    r.index = f.index;
-    r.stamp_s = f.stamp_s;
-    r.status = FrameStatus::kTracked;
-    r.has_pose = true;
+    FrameReport r = PosedReport(window[w]);
     r.keyframe = true;
     r.initialisation = true;
-    r.cam_from_world = f.cam_from_world;
-    r.smoothed_cam_from_world = smoother_.Update(f.cam_from_world);
-    ResidualStats(window[w], &r);
+    r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
     if (w + 1 == window.size()) {
       r.new_points = static_cast<int>(depths.size());
       r.note = fmt::format(
@@ -532,7 +676,6 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   // same Fibonacci keyframe window the Monte Carlo adjustment scores over, and of every point seen at least
   // twice in it; the oldest keyframes stay fixed (gauge and scale). Outliers leave the map by the same rule
   // as in the Monte Carlo adjustment: median residual over the window above the threshold.
-  const MappingOptions& mo = options_.mapping;
   const std::vector<int> adjustable_slots = WindowSlots();
   if (adjustable_slots.size() < 3) return;
   // The cameras: every posed keyframe from the oldest of the window to this one. The window's keyframes are
@@ -550,23 +693,10 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   }
   std::vector<Pose> cams;
   for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
-  std::unordered_map<int64_t, int> index;
-  std::vector<MapPoint*> pts;
-  std::vector<Eigen::Vector3d> X;
-  std::vector<geometry::BundleObservation> obs;
-  std::unordered_map<int64_t, int> count;
-  for (int s : window)
-    for (const FeatureUndistorted& f : map_.frames[s].features)
-      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
-  for (size_t w = 0; w < window.size(); ++w)
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
-      MapPoint* p = map_.Find(f.id);
-      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
-      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(pts.size()));
-      if (fresh) pts.push_back(p), X.push_back(p->position_in_world);
-      obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
-    }
-  if (pts.empty()) return;
+  WindowPoints wp = CollectWindowPoints(window);
+  if (wp.pts.empty()) return;
+  std::vector<Eigen::Vector3d>& X = wp.X;
+  const std::vector<geometry::BundleObservation>& obs = wp.obs;
   geometry::BundleAdjustOptions bo;
   bo.focal_px = focal_px_;
   bo.huber_px = options_.init.refine_huber_px;
@@ -574,20 +704,9 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   bo.cauchy = true;  // wrong matches of tens of pixels must stop pulling (Huber's pull never fades)
   geometry::BundleAdjust(cams, X, obs, fixed, bo);
   for (size_t w = 0; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
-  std::vector<std::vector<double>> residuals(pts.size());
-  for (const geometry::BundleObservation& o : obs)
-    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], X[o.point], o.uv_norm, bo.focal_px));
-  const FrameRecord& cur = map_.frames[slot];
-  for (size_t i = 0; i < pts.size(); ++i) {
-    pts[i]->position_in_world = X[i];
-    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > mo.adjust_threshold_px) {
-      pts[i]->state = PointState::kRemoved;
-      pts[i]->removed_frame = cur.index;
-      ++r->removed;
-    } else {
-      ++r->adjusted;
-    }
-  }
+  const int removed = StoreAdjustedPoints(cams, wp, map_.frames[slot].index);
+  r->removed += removed;
+  r->adjusted += static_cast<int>(wp.pts.size()) - removed;
 }
 
 void System::AdjustPoints(int slot, FrameReport* r) {
@@ -702,6 +821,18 @@ void System::AdjustPoints(int slot, FrameReport* r) {
       ++r->removed;
     }
   }
+}
+
+FrameReport System::PosedReport(int slot) const {
+  const FrameRecord& f = map_.frames[slot];
+  FrameReport r;
+  r.index = f.index;
+  r.stamp_s = f.stamp_s;
+  r.status = FrameStatus::kTracked;
+  r.has_pose = true;
+  r.cam_from_world = f.cam_from_world;
+  ResidualStats(slot, &r);
+  return r;
 }
 
 void System::ResidualStats(int slot, FrameReport* r) const {

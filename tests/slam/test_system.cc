@@ -59,9 +59,41 @@ TEST(System, CleanScenarioFromObservationsAlone) {
   EXPECT_LT(point_err[point_err.size() / 2], 0.01);
 }
 
+// The issue's target on the noisy scenario (σ = 1 px, 10 % wrong matches): mean error ≤ 2 cm and ≤ 1 deg after
+// a Sim(3) alignment, here on 150 frames (past the settling, which ends at frames 83-107 on seeds 1-6) and at
+// 2^16 hypotheses to keep the test short. Seeds 1 and 5: before the settling, the worst (5: 11.7 cm) and the
+// one whose first map came out 1.8x too shallow (1).
+TEST(System, NoisyScenarioMeetsThePapersPrecisionAfterSettling) {
+  for (uint64_t seed : {1, 5}) {
+    const apps::SequenceInput in = Scenario(150, 1.0, 0.1, seed);
+    const apps::SlamRunResult res = RunSystem(in);
+    ASSERT_TRUE(res.initialised);
+    int settled = 0, lost = 0;
+    for (const FrameReport& r : res.reports) {
+      settled += r.note.rfind("settled", 0) == 0;
+      lost += r.status == FrameStatus::kLost;
+    }
+    EXPECT_EQ(settled, 1) << "seed " << seed;
+    EXPECT_EQ(lost, 0) << "seed " << seed;
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    EXPECT_LT(err.ate_m.mean, 0.02) << "seed " << seed;
+    EXPECT_LT(err.rot_deg.mean, 1.0) << "seed " << seed;
+    EXPECT_NEAR(err.alignment_result.gt_world_from_est_world.scale, 1.0, 0.1) << "seed " << seed;
+    if (seed == 1) {
+      // Without the settling the same run keeps the shallow first map: its scale is off by far more than 10 %.
+      SystemOptions o = FastOptions();
+      o.init.settle_parallax_deg = 0;
+      const apps::SlamRunResult raw =
+          apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), true);
+      const auto raw_err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(raw.reports, false));
+      EXPECT_GT(std::abs(raw_err.alignment_result.gt_world_from_est_world.scale - 1.0), 0.2);
+      EXPECT_GT(raw_err.ate_m.mean, err.ate_m.mean);
+    }
+  }
+}
+
 TEST(System, NoisyScenarioIsTrackedThroughout) {
-  // sigma = 1 px and 10 % wrong matches: every frame tracked; accuracy is issue #4's open point (see the
-  // issue note): measured 1.4 cm / 1.9 deg on this sequence, asserted loosely as a regression guard only.
+  // sigma = 1 px and 10 % wrong matches, 120 frames: every frame tracked, at the noise level.
   const apps::SequenceInput in = Scenario(120, 1.0, 0.1, 3);
   const apps::SlamRunResult res = RunSystem(in);
   ASSERT_TRUE(res.initialised);
