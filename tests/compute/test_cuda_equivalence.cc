@@ -167,48 +167,11 @@ TEST(CudaHost, TableKeyChangesWhenTheTableChangesAndOnlyThen) {
   EXPECT_EQ(cuda::MakeNormalTableKey(NormalTable()).count, 0);
 }
 
-// The fixture's five cameras on an arc looking at the origin from 3 m, and `num_points` points near the
-// origin seen by a varying number of them (point p by p % 6 cameras: some by none), observed 1-2 px off,
-// with centres a few cm from the truth.
-struct PointScene : ArcCameras {
-  std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
-  std::vector<int> begin{0}, pose_idx;
-
-  explicit PointScene(int num_points, int first_obs = 0) {
-    // Observations before first_obs belong to no point: obs_begin need not start at 0.
-    for (int o = 0; o < first_obs; ++o) pose_idx.push_back(0), ou.push_back(0), ov.push_back(0);
-    begin[0] = first_obs;
-    std::mt19937 rng(11);
-    std::uniform_real_distribution<float> uni(-1.0f, 1.0f);
-    for (int p = 0; p < num_points; ++p) {
-      const float X[3] = {0.3f * uni(rng), 0.3f * uni(rng), 0.3f * uni(rng)};
-      cx.push_back(X[0] + 0.03f * uni(rng)), cy.push_back(X[1] + 0.03f * uni(rng)), cz.push_back(X[2] + 0.03f * uni(rng));
-      sx.push_back(0.03f), sy.push_back(0.03f), sz.push_back(0.05f);
-      for (int k = 0; k < p % 6; ++k) {
-        const ScaledPose& P = poses[k];
-        const float x = P.t[0] + P.r[0] * X[0] + P.r[1] * X[1] + P.r[2] * X[2];
-        const float y = P.t[1] + P.r[3] * X[0] + P.r[4] * X[1] + P.r[5] * X[2];
-        const float z = P.t[2] + P.r[6] * X[0] + P.r[7] * X[1] + P.r[8] * X[2];
-        pose_idx.push_back(k), ou.push_back(x / z + 1.5f * uni(rng)), ov.push_back(y / z + 1.5f * uni(rng));
-      }
-      begin.push_back(static_cast<int>(pose_idx.size()));
-    }
-  }
-  PointAdjustProblem Problem() const {
-    PointAdjustProblem pr;
-    pr.poses = poses.data();
-    pr.num_poses = static_cast<int>(poses.size());
-    pr.cx = cx.data(), pr.cy = cy.data(), pr.cz = cz.data(), pr.sx = sx.data(), pr.sy = sy.data(), pr.sz = sz.data();
-    pr.obs_begin = begin.data();
-    pr.num_points = static_cast<int>(cx.size());
-    pr.obs_pose = pose_idx.data(), pr.obs_u = ou.data(), pr.obs_v = ov.data();
-    pr.params = params;
-    return pr;
-  }
-};
+// Point problems: PointFixture (compute/pose_fixture.h): five cameras on an arc, point p seen by p % 6 of them
+// (some by none).
 
 TEST(CudaHost, PointStagingRebasesAndRejectsWhatWouldReadOutOfBounds) {
-  const PointScene sc(20, /*first_obs=*/3);
+  const PointFixture sc(20, 5, PointFixture::Views::kVarying, /*first_obs=*/3);
   const PointAdjustProblem pr = sc.Problem();
   const cuda::PointStagingLayout l = cuda::PlanPointStaging(pr);
   EXPECT_EQ(l.first_obs, 3);
@@ -239,10 +202,10 @@ TEST(CudaHost, PointStagingRebasesAndRejectsWhatWouldReadOutOfBounds) {
       EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
     }
   };
-  PointScene bad_pose(20);
+  PointFixture bad_pose(20);
   bad_pose.pose_idx[4] = 5;  // only poses 0..4
   throws_saying(bad_pose.Problem(), "refers to keyframe pose 5 of 5");
-  PointScene decreasing(20);
+  PointFixture decreasing(20);
   decreasing.begin[7] = decreasing.begin[8] + 1;
   throws_saying(decreasing.Problem(), "obs_begin decreases");
   PointAdjustProblem null_obs = sc.Problem();
@@ -403,7 +366,7 @@ TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
   EXPECT_EQ(y.score, gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count()).score);
 }
 
-void ExpectPointEquivalent(PointKernel& gpu, const PointScene& sc, const NormalTable& table, int samples,
+void ExpectPointEquivalent(PointKernel& gpu, const PointFixture& sc, const NormalTable& table, int samples,
                            const std::string& what) {
   const PointAdjustProblem pr = sc.Problem();
   std::vector<PointBest> cpu(pr.num_points), got(pr.num_points);
@@ -440,12 +403,12 @@ TEST(CudaEquivalence, PointKernelMatchesCpu) {
   auto gpu = CudaPoint();
   EXPECT_EQ(gpu->kind(), BackendKind::kCuda);
   const NormalTable table(4096, 3);
-  ExpectPointEquivalent(*gpu, PointScene(300), table, 4000, "300 points, 4000 samples");  // partial last round
-  ExpectPointEquivalent(*gpu, PointScene(7, /*first_obs=*/5), table, 4096, "obs_begin[0] = 5");
-  ExpectPointEquivalent(*gpu, PointScene(40), table, 100, "fewer samples than threads");
-  ExpectPointEquivalent(*gpu, PointScene(40), table, 9999, "samples > rows (clamped)");
+  ExpectPointEquivalent(*gpu, PointFixture(300), table, 4000, "300 points, 4000 samples");  // partial last round
+  ExpectPointEquivalent(*gpu, PointFixture(7, 5, PointFixture::Views::kVarying, /*first_obs=*/5), table, 4096, "obs_begin[0] = 5");
+  ExpectPointEquivalent(*gpu, PointFixture(40), table, 100, "fewer samples than threads");
+  ExpectPointEquivalent(*gpu, PointFixture(40), table, 9999, "samples > rows (clamped)");
   // No samples: as the CPU, index -1 and an infinite score.
-  const PointScene sc(3);
+  const PointFixture sc(3);
   std::vector<PointBest> best(3);
   gpu->Score(sc.Problem(), table, 0, best.data());
   for (const PointBest& b : best) {
@@ -453,7 +416,7 @@ TEST(CudaEquivalence, PointKernelMatchesCpu) {
     EXPECT_EQ(b.score, std::numeric_limits<float>::infinity());
   }
   // An inconsistent problem is refused before anything reaches the device.
-  PointScene bad(5);
+  PointFixture bad(5);
   bad.pose_idx[0] = 42;
   EXPECT_THROW(gpu->Score(bad.Problem(), table, 100, best.data()), std::invalid_argument);
 }
@@ -461,7 +424,7 @@ TEST(CudaEquivalence, PointKernelMatchesCpu) {
 TEST(CudaEquivalence, PointKernelReusesBuffersAndFollowsTableChanges) {
   REQUIRE_CUDA_DEVICE();
   auto gpu = CudaPoint();
-  const PointScene sc(200);
+  const PointFixture sc(200);
   NormalTable table(4096, 3);
   std::vector<PointBest> first(200), again(200);
   gpu->Score(sc.Problem(), table, 4096, first.data());
@@ -473,7 +436,7 @@ TEST(CudaEquivalence, PointKernelReusesBuffersAndFollowsTableChanges) {
       EXPECT_EQ(again[p].score, first[p].score);
     }
   }
-  const PointScene fewer(50);
+  const PointFixture fewer(50);
   gpu->Score(fewer.Problem(), table, 2048, again.data());
   const cuda::CudaKernelStats steady = Stats(*gpu);
   EXPECT_EQ(steady.table_uploads, 1);
