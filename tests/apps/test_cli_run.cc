@@ -1,10 +1,13 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 #include "io/ply.h"
 #include "io/trajectory_io.h"
+#include "cli_report.h"
 #include "test_util.h"
 #include <filesystem>
 
@@ -12,6 +15,7 @@ namespace mcslam {
 namespace {
 
 using testing::CountDataLines;
+using testing::Field;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
@@ -160,10 +164,40 @@ TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   EXPECT_GT(std::stod(r.output.substr(at + 12)), 1e6);  // any working kernel does far more than 1e6/s
 }
 
+TEST(CliBench, PointsPrintsLatencyAndEvaluationsPerSecond) {
+  const auto r = RunMcslam("bench points --points 50 --samples 4096 --window 6 --repeats 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_NE(r.output.find("bench points backend=cpu threads="), std::string::npos) << r.output;
+  EXPECT_EQ(Field(r.output, "observations"), 300.0) << r.output;  // every point seen by every keyframe
+  const double ms = Field(r.output, "call_ms_median"), min_ms = Field(r.output, "call_ms_min");
+  const double evals = Field(r.output, "evals_per_s");
+  EXPECT_GT(ms, 0.0) << r.output;
+  EXPECT_LE(min_ms, ms) << r.output;
+  // samples x observations per call over the median call. Tolerance: the rounding of the printed figures
+  // (evals to 4 significant digits: 5e-4 relative; ms to 3 decimals: 5e-4 ms absolute).
+  EXPECT_NEAR(evals, 4096.0 * 300 / (ms * 1e-3), evals * (5e-4 + 5e-4 / ms)) << r.output;
+  EXPECT_GT(evals, 1e6);  // any working kernel does far more than 1e6/s
+  // Several sizes: one line each, in order.
+  const auto two = RunMcslam("bench points --points 10 20 --samples 256 --window 3 --repeats 1");
+  ASSERT_EQ(two.exit_code, 0) << two.output;
+  const size_t a = two.output.find("points=10 keyframes=3 observations=30 "), b = two.output.find("points=20 keyframes=3 observations=60 ");
+  EXPECT_NE(a, std::string::npos) << two.output;
+  EXPECT_NE(b, std::string::npos) << two.output;
+  EXPECT_LT(a, b);
+  const auto bad = RunMcslam("bench points --window 0");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--window"), std::string::npos) << bad.output;
+}
+
 TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {
-  const auto r = RunMcslam("bench pose --hypotheses 1024 --backend cuda");
-  if (r.exit_code == 0) GTEST_SKIP() << "a CUDA device is present";
-  EXPECT_NE(r.output.find("--backend cuda"), std::string::npos) << r.output;
+  for (const std::string cmd : {"bench pose --hypotheses 1024 --backend cuda", "bench pose --hypotheses 1024 --compare",
+                                "bench points --points 10 --backend cuda", "bench points --points 10 --compare"}) {
+    const auto r = RunMcslam(cmd);
+    if (r.exit_code == 0) GTEST_SKIP() << "a CUDA device is present";
+    EXPECT_NE(r.output.find("--backend cuda"), std::string::npos) << cmd << ": " << r.output;
+    // The error comes before anything is timed: no figure of the CPU either.
+    EXPECT_EQ(r.output.find("backend=cpu"), std::string::npos) << cmd << ": " << r.output;
+  }
 }
 
 }  // namespace
