@@ -15,6 +15,7 @@ namespace mcslam {
 namespace {
 
 using testing::CountDataLines;
+using testing::ExpectSaneRunTimes;
 using testing::Field;
 using testing::ReadText;
 using testing::RunMcslam;
@@ -31,6 +32,11 @@ TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
   EXPECT_EQ(est.size(), 40u);
   EXPECT_EQ(smooth.size(), 40u);
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 41);  // header + 40 frames
+  ExpectSaneRunTimes(r.output, dir / "r/report.json");
+  const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
+  EXPECT_EQ(j["mode"], "known_map");
+  EXPECT_EQ(j["frames"], 40);
+  EXPECT_EQ(j["options"]["backend"], "cpu");
   // mcslam eval on the output: the paper's bounds hold on this short run too (2 cm, 1 degree).
   const auto e = RunMcslam("eval " + dir / "s/groundtruth.txt " + dir / "r/trajectory.txt --align none");
   ASSERT_EQ(e.exit_code, 0) << e.output;
@@ -108,6 +114,13 @@ TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 61);
   EXPECT_NE(csv.find("trans_err_m"), std::string::npos);
   EXPECT_NE(csv.find("initialised from frames"), std::string::npos);
+  ExpectSaneRunTimes(r.output, dir / "r/report.json");
+  const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
+  EXPECT_EQ(j["mode"], "slam");
+  EXPECT_EQ(j["tracked"], 60);
+  EXPECT_TRUE(j["initialised"].get<bool>());
+  const double trans_mean = j["ground_truth"]["trans_mean_m"];
+  EXPECT_NEAR(Field(r.output, "trans_mean_m"), trans_mean, 1e-5 * trans_mean);  // 6 significant digits printed
   // Clean data: the paper's bounds with a wide margin (measured ~2 mm / 0.05 deg).
   const double ate = std::stod(r.output.substr(r.output.find("trans_mean_m=") + 13));
   EXPECT_LT(ate, 0.01);
