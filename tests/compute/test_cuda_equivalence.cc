@@ -103,6 +103,16 @@ TEST(CudaHost, CandidateOrderIsTotalWithTiesToTheLowestIndexAndNanLast) {
   EXPECT_TRUE(cuda::Better({nan, 1}, {nan, 2}));
   EXPECT_TRUE(cuda::Better({nan, 7}, cuda::NoCandidate()));  // the identity loses to anything real
   EXPECT_TRUE(cuda::Better({inf, 7}, cuda::NoCandidate()));
+  // What enters the reductions: an infinite or NaN score is no candidate (the CPU never picks one), so a
+  // reduction over nothing but those returns the identity, which the host reads as "no winner" (-1).
+  EXPECT_EQ(cuda::Scored(3.5f, 7).index, 7);
+  EXPECT_EQ(cuda::Scored(3.5f, 7).score, 3.5f);
+  EXPECT_EQ(cuda::Scored(-1e30f, 2).index, 2);
+  EXPECT_TRUE(cuda::IsNoCandidate(cuda::Scored(inf, 7)));
+  EXPECT_TRUE(cuda::IsNoCandidate(cuda::Scored(nan, 7)));
+  EXPECT_TRUE(cuda::IsNoCandidate(cuda::BestOf(cuda::Scored(nan, 1), cuda::Scored(inf, 0))));
+  EXPECT_EQ(cuda::BestOf(cuda::Scored(nan, 0), cuda::Scored(1e30f, 9)).index, 9);
+  EXPECT_FALSE(cuda::IsNoCandidate(cuda::Scored(1e30f, 9)));
   const Candidate a{2.0f, 5}, b{2.0f, 3};
   EXPECT_EQ(cuda::BestOf(a, b).index, 3);
   EXPECT_EQ(cuda::BestOf(b, a).index, 3);
@@ -321,6 +331,51 @@ TEST(CudaEquivalence, PoseKernelPaperSizeAndExactFeatures) {
   std::vector<float> scores(64);
   gpu->Score(behind.sampling, behind.View(), behind.params, big, 64, scores.data());
   for (float s : scores) EXPECT_FLOAT_EQ(s, 21.0f);
+}
+
+TEST(CudaEquivalence, NoFiniteScoreMeansNoWinnerOnBothBackends) {
+  const NormalTable table(4096, 5);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  // The cap keeps every score finite (a point behind the camera, or a NaN distance, costs the cap), so only an
+  // infinite cap gives non-finite scores: points behind the camera, or a NaN feature, then make every
+  // hypothesis's score infinite (or NaN). The CPU returns no winner (index -1, the tracker's "no finite
+  // hypothesis score"), and so must the device.
+  PoseFixture with_nan(50);
+  with_nan.params.max_distance_px = inf;
+  with_nan.u[17] = nan;
+  PoseFixture behind(20);
+  for (float& z : behind.z) z = -3.0f;
+  behind.params.max_distance_px = inf;
+  const std::vector<const PoseFixture*> poses{&with_nan, &behind};
+  for (const PoseFixture* fx : poses)
+    EXPECT_EQ(MakeCpuPoseKernel()->Score(fx->sampling, fx->View(), fx->params, table, 3000).index, -1);
+  // Points, under an infinite cap: a NaN centre makes every sample of that point score infinite: no winner
+  // for it; the others have one.
+  PointFixture sc(30);
+  sc.params.max_distance_px = inf;
+  sc.cx[10] = nan;
+  ASSERT_GT(sc.begin[11], sc.begin[10]);  // point 10 is seen (by 10 % 6 = 4 cameras)
+  std::vector<PointBest> cpu(30), got(30);
+  MakeCpuPointKernel()->Score(sc.Problem(), table, 4096, cpu.data());
+  for (int p = 0; p < 30; ++p) EXPECT_EQ(cpu[p].index < 0, p == 10) << "point " << p;
+
+  REQUIRE_CUDA_DEVICE();
+  auto gpu = CudaPose();
+  for (const PoseFixture* fx : poses) {
+    const BestHypothesis g = gpu->Score(fx->sampling, fx->View(), fx->params, table, 3000);
+    EXPECT_EQ(g.index, -1);
+    EXPECT_EQ(g.score, inf);
+  }
+  CudaPoint()->Score(sc.Problem(), table, 4096, got.data());
+  for (int p = 0; p < 30; ++p) {
+    if (p == 10) {
+      EXPECT_EQ(got[p].index, -1);
+      EXPECT_EQ(got[p].score, inf);
+    } else {
+      EXPECT_GE(got[p].index, 0) << "point " << p;
+      EXPECT_NEAR(got[p].score, cpu[p].score, Tolerance(cpu[p].score, sc.begin[p + 1] - sc.begin[p])) << "point " << p;
+    }
+  }
 }
 
 TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
