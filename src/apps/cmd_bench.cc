@@ -1,10 +1,12 @@
-// mcslam bench: throughput of the Monte Carlo kernels, and the accuracy of the pose estimator against the
+// mcslam bench: throughput of the Monte Carlo kernels (pose, points), and the accuracy of the pose estimator against the
 // number of hypotheses on the paper's noisy scenario.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -14,74 +16,149 @@
 #include "apps/known_map_job.h"
 #include "apps/options.h"
 #include "compute/pose_fixture.h"
+#include "slam/system.h"
 #include "eval/trajectory_eval.h"
 
 namespace mcslam::apps {
 
 namespace {
 
-
-struct PoseBenchArgs {
-  int hypotheses = 1 << 18;
-  std::vector<int> points{200};
-  int repeats = 15;
+// --backend cpu,cuda,auto (several: side by side on the same problem) or --compare (cpu,cuda).
+struct BenchBackends {
   std::vector<std::string> backends{"cpu"};
-  bool compare = false;  // --compare: the same as --backend cpu,cuda
+  bool compare = false;
+  std::vector<std::string> Names() const { return compare ? std::vector<std::string>{"cpu", "cuda"} : backends; }
 };
+
+void AddBenchBackendFlags(CLI::App* cmd, BenchBackends* b) {
+  CLI::Option* backend =
+      cmd->add_option("--backend", b->backends,
+                      "Compute backend: cpu, cuda or auto (cuda when a GPU is present); several, comma-separated "
+                      "(cpu,cuda), run side by side on the same problem and are compared")
+          ->delimiter(',')
+          ->check(CLI::IsMember({"cpu", "cuda", "auto"}))
+          ->capture_default_str();
+  cmd->add_flag("--compare", b->compare, "CPU and CUDA side by side (the same as --backend cpu,cuda)")->excludes(backend);
+}
 
 const char* BackendName(compute::BackendKind kind) { return kind == compute::BackendKind::kCuda ? "cuda" : "cpu"; }
 
-struct PoseBenchRun {
-  std::string backend;
-  double median_ms = 0, min_ms = 0;
-  compute::BestHypothesis best;
-};
-
-// Several backends run one after the other on the same problem and table; after the first, each is
-// compared with the first (time and chosen hypothesis), which makes a quick equivalence check on a GPU.
-void BenchPose(const PoseBenchArgs& a) {
-  const std::vector<std::string> names = a.compare ? std::vector<std::string>{"cpu", "cuda"} : a.backends;
-  // Every kernel first: a backend that cannot run is an error before anything is timed.
-  std::vector<std::unique_ptr<compute::PoseKernel>> kernels;
-  for (const std::string& name : names) kernels.push_back(MakePoseKernelFor(name));
+// Every kernel first, so that a backend that cannot run is an error before anything is timed; then the
+// device's name when one of them runs on it.
+template <typename Kernel, typename Make>
+std::vector<std::unique_ptr<Kernel>> MakeBenchKernels(const BenchBackends& b, Make make) {
+  std::vector<std::unique_ptr<Kernel>> kernels;
+  for (const std::string& name : b.Names()) kernels.push_back(make(name));
   for (const auto& k : kernels)
     if (k->kind() == compute::BackendKind::kCuda) {
       fmt::print("# cuda device 0: {}\n", compute::CudaDeviceDescription());
       break;
     }
+  return kernels;
+}
+
+std::string Where(compute::BackendKind kind) {
+  return kind == compute::BackendKind::kCuda ? std::string("device=0")
+                                             : fmt::format("threads={}", compute::CpuThreadCount());
+}
+
+struct CallTimes {
+  double median_ms = 0, min_ms = 0;
+};
+
+// One untimed call (the first call uploads the normal table to a device and grows its buffers), then
+// `repeats` timed ones: wall time of the whole call, so on a device it includes staging and transfers.
+template <typename Call>
+CallTimes TimeCalls(int repeats, Call&& call) {
+  call();
+  std::vector<double> ms;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    call();
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  return {UpperMedian(ms), *std::min_element(ms.begin(), ms.end())};
+}
+
+double RelDiff(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-30); }
+
+struct PoseBenchArgs : BenchBackends {
+  int hypotheses = 1 << 18;
+  std::vector<int> points{200};
+  int repeats = 15;
+};
+
+// Several backends run one after the other on the same problem and table; after the first, each is
+// compared with the first (time and chosen hypothesis), which makes a quick equivalence check on a GPU.
+void BenchPose(const PoseBenchArgs& a) {
+  const auto kernels = MakeBenchKernels<compute::PoseKernel>(a, MakePoseKernelFor);
   const compute::NormalTable table(a.hypotheses, 1);
   for (int np : a.points) {
     const compute::PoseFixture fx(np);
-    std::vector<PoseBenchRun> runs;
+    std::vector<std::pair<CallTimes, compute::BestHypothesis>> runs;
     for (const auto& kernel : kernels) {
-      kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);  // warm-up (and table upload)
-      PoseBenchRun run;
-      run.backend = BackendName(kernel->kind());
-      std::vector<double> ms;
-      for (int r = 0; r < a.repeats; ++r) {
-        const auto t0 = std::chrono::steady_clock::now();
-        run.best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
-        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-        if (run.best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
-      }
-      run.median_ms = UpperMedian(ms);
-      run.min_ms = *std::min_element(ms.begin(), ms.end());
-      const std::string where = kernel->kind() == compute::BackendKind::kCuda
-                                    ? std::string("device=0")
-                                    : fmt::format("threads={}", compute::CpuThreadCount());
+      compute::BestHypothesis best;
+      const CallTimes t = TimeCalls(a.repeats, [&] {
+        best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
+        if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
+      });
       fmt::print("bench pose backend={} {} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "
                  "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
-                 run.backend, where, a.hypotheses, np, a.repeats, run.median_ms, run.min_ms,
-                 double(a.hypotheses) * np / (run.median_ms * 1e-3));
-      runs.push_back(run);
+                 BackendName(kernel->kind()), Where(kernel->kind()), a.hypotheses, np, a.repeats, t.median_ms, t.min_ms,
+                 double(a.hypotheses) * np / (t.median_ms * 1e-3));
+      runs.emplace_back(t, best);
     }
     for (size_t i = 1; i < runs.size(); ++i) {
-      const PoseBenchRun &x = runs[0], &y = runs[i];
-      const double rel = std::abs(double(y.best.score) - x.best.score) / std::max(std::abs(double(x.best.score)), 1e-30);
+      const auto &[tx, x] = runs[0];
+      const auto &[ty, y] = runs[i];
       fmt::print("bench pose compare {}_vs_{} points={} speedup={:.2f} best_index={}/{} best_score={:.6g}/{:.6g} "
                  "score_rel_diff={:.2e}\n",
-                 y.backend, x.backend, np, x.median_ms / y.median_ms, y.best.index, x.best.index, y.best.score,
-                 x.best.score, rel);
+                 BackendName(kernels[i]->kind()), BackendName(kernels[0]->kind()), np, tx.median_ms / ty.median_ms,
+                 y.index, x.index, y.score, x.score, RelDiff(y.score, x.score));
+    }
+  }
+}
+
+// The point-adjustment kernel (Algorithm 2) on the shape of one keyframe's adjustment: every point seen by
+// every keyframe of the window, the System's samples per point and window size by default.
+struct PointBenchArgs : BenchBackends {
+  std::vector<int> points{400};
+  int samples = slam::MappingOptions{}.samples;
+  int window = slam::MappingOptions{}.window;
+  int repeats = 15;
+};
+
+void BenchPoints(const PointBenchArgs& a) {
+  const auto kernels = MakeBenchKernels<compute::PointKernel>(a, MakePointKernelFor);
+  const compute::NormalTable table(a.samples, 1);
+  for (int np : a.points) {
+    const compute::PointFixture fx(np, a.window, compute::PointFixture::Views::kAll);
+    const compute::PointAdjustProblem pr = fx.Problem();
+    const double evals = double(a.samples) * fx.observations();
+    std::vector<std::pair<CallTimes, std::vector<compute::PointBest>>> runs;
+    for (const auto& kernel : kernels) {
+      std::vector<compute::PointBest> best(np);
+      const CallTimes t = TimeCalls(a.repeats, [&] { kernel->Score(pr, table, a.samples, best.data()); });
+      for (const compute::PointBest& b : best)
+        if (b.index < 0) throw std::runtime_error("bench: kernel returned no sample for a point");
+      fmt::print("bench points backend={} {} points={} keyframes={} observations={} samples={} repeats={} "
+                 "call_ms_median={:.3f} call_ms_min={:.3f} evals_per_s={:.4g}\n",
+                 BackendName(kernel->kind()), Where(kernel->kind()), np, a.window, fx.observations(), a.samples,
+                 a.repeats, t.median_ms, t.min_ms, evals / (t.median_ms * 1e-3));
+      runs.emplace_back(t, std::move(best));
+    }
+    for (size_t i = 1; i < runs.size(); ++i) {
+      const auto &[tx, x] = runs[0];
+      const auto &[ty, y] = runs[i];
+      int same = 0;
+      double worst = 0;
+      for (int p = 0; p < np; ++p) {
+        same += x[p].index == y[p].index;
+        worst = std::max(worst, RelDiff(y[p].score, x[p].score));
+      }
+      fmt::print("bench points compare {}_vs_{} points={} speedup={:.2f} same_best={}/{} score_rel_diff_max={:.2e}\n",
+                 BackendName(kernels[i]->kind()), BackendName(kernels[0]->kind()), np, tx.median_ms / ty.median_ms,
+                 same, np, worst);
     }
   }
 }
@@ -133,16 +210,24 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   pose->add_option("--repeats", pa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
-  CLI::Option* backend =
-      pose->add_option("--backend", pa->backends,
-                       "Compute backend: cpu, cuda or auto (cuda when a GPU is present); several, comma-separated "
-                       "(cpu,cuda), run side by side on the same problem and are compared")
-          ->delimiter(',')
-          ->check(CLI::IsMember({"cpu", "cuda", "auto"}))
-          ->capture_default_str();
-  pose->add_flag("--compare", pa->compare, "CPU and CUDA side by side (the same as --backend cpu,cuda)")
-      ->excludes(backend);
+  AddBenchBackendFlags(pose, pa.get());
   pose->callback([pa] { BenchPose(*pa); });
+
+  auto qa = std::make_shared<PointBenchArgs>();
+  CLI::App* points = bench->add_subcommand(
+      "points", "Point-adjustment kernel: time per call (one keyframe's adjustment) and sample x observation evaluations/s");
+  points->add_option("--points", qa->points, "Points adjusted, each seen by every keyframe (several values: one line each)")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  points->add_option("--samples", qa->samples, "Samples per point (the System's default)")
+      ->check(CLI::Range(1, 1 << 22))
+      ->capture_default_str();
+  points->add_option("--window", qa->window, "Keyframes in the window (the System's default)")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  points->add_option("--repeats", qa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
+  AddBenchBackendFlags(points, qa.get());
+  points->callback([qa] { BenchPoints(*qa); });
 
   auto sa = std::make_shared<SweepArgs>();
   sa->scenario.noise_px = 1.0;

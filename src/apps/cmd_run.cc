@@ -3,12 +3,12 @@
 // map (the paper's precision test). Any other input (image folder, video, webcam, dataset) goes through the
 // front end first (apps/image_job.h).
 #include <algorithm>
-#include <chrono>
 #include <filesystem>
 #include <set>
 #include <string>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
@@ -16,6 +16,7 @@
 #include "apps/image_job.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
+#include "apps/run_timing.h"
 #include "apps/slam_job.h"
 #include "io/ply.h"
 #include "eval/trajectory_eval.h"
@@ -37,6 +38,19 @@ struct RunArgs {
   std::set<std::string> given_flags;  // the flags set on the command line: image input keeps their values
 };
 
+
+// The part of report.json that every run on a folder of observations shares.
+nlohmann::json RunReportHead(const RunArgs& a, const char* mode) {
+  nlohmann::json j;
+  j["input"] = a.input;
+  j["mode"] = mode;
+  j["options"] = {{"backend", a.backend},
+                  {"hypotheses", a.pose.tracker.hypotheses},
+                  {"rounds", a.pose.tracker.rounds},
+                  {"seed", a.pose.tracker.seed},
+                  {"random", a.pose.random}};
+  return j;
+}
 
 slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   slam::SystemOptions options = a.system;
@@ -101,14 +115,37 @@ void RunFullSlam(const RunArgs& a) {
     keyframes += r.keyframe;
     if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
   }
+  const double fps = res.reports.size() / std::max(res.times.wall_s, 1e-9);
   std::string line = fmt::format("frames={} tracked={} lost={} not_initialised={} keyframes={} map_points={} "
                                  "frame_ms_median={:.3f} fps={:.1f}",
                                  res.reports.size(), tracked, lost, waiting, keyframes, res.map.points.size(),
-                                 UpperMedian(ms), res.reports.size() / std::max(res.wall_s, 1e-9));
-  if (err)
+                                 UpperMedian(ms), fps);
+  nlohmann::json j = RunReportHead(a, "slam");
+  j["options"]["samples_per_point"] = options.mapping.samples;
+  j["frames"] = res.reports.size();
+  j["tracked"] = tracked;
+  j["lost"] = lost;
+  j["not_initialised"] = waiting;
+  j["keyframes"] = keyframes;
+  j["map_points"] = res.map.points.size();
+  j["initialised"] = res.initialised;
+  j["interrupted"] = Interrupted();
+  j["frame_ms_median"] = UpperMedian(ms);
+  j["fps"] = fps;
+  AddRunTimes(res.times, &j);
+  j["ground_truth"] = nullptr;
+  if (err) {
     line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} scale={:.6g}", err->ate_m.rmse,
                         err->ate_m.mean, err->rot_deg.mean, err->alignment_result.gt_world_from_est_world.scale);
+    j["ground_truth"] = {{"alignment", "sim3"},
+                         {"scale", err->alignment_result.gt_world_from_est_world.scale},
+                         {"ate_rmse_m", err->ate_m.rmse},
+                         {"trans_mean_m", err->ate_m.mean},
+                         {"rot_mean_deg", err->rot_deg.mean}};
+  }
   if (!res.reports.empty()) line += fmt::format(" final_reproj_mean_px={:.4f}", res.reports.back().reproj_mean_px);
+  line += RunTimesFields(res.times);
+  WriteReportJson((out / "report.json").string(), j);
   fmt::print("{}\n", line);
   if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
   if (!res.initialised)
@@ -138,7 +175,7 @@ void Run(const RunArgs& a) {
                input.map.size(), options.tracker.hypotheses, a.backend);
 
   InstallInterruptHandler();
-  const auto t_start = std::chrono::steady_clock::now();
+  const RunClock clock;
   size_t done = 0;
   const auto results = RunKnownMap(
       input, options, std::move(kernel),
@@ -147,7 +184,7 @@ void Run(const RunArgs& a) {
         if (!r.estimate.tracked) spdlog::warn("frame {} lost: {}", r.index, r.estimate.lost_reason);
       },
       [] { return Interrupted(); });
-  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  const RunTimes times = clock.Elapsed();
   if (Interrupted()) spdlog::warn("interrupted: writing the {} frames done so far", results.size());
 
   const io::Trajectory traj = ResultsToTrajectory(results, false);
@@ -164,8 +201,19 @@ void Run(const RunArgs& a) {
     keyframes += r.estimate.keyframe;
     ms.push_back(r.time_ms);
   }
+  const double fps = results.size() / std::max(times.wall_s, 1e-9);
   std::string line = fmt::format("frames={} tracked={} lost={} keyframes={} pose_ms_median={:.3f} fps={:.1f}",
-                                 results.size(), tracked + 1, lost, keyframes, UpperMedian(ms), results.size() / wall_s);
+                                 results.size(), tracked + 1, lost, keyframes, UpperMedian(ms), fps);
+  nlohmann::json j = RunReportHead(a, "known_map");
+  j["frames"] = results.size();
+  j["tracked"] = tracked + 1;  // the first frame's pose is given
+  j["lost"] = lost;
+  j["keyframes"] = keyframes;
+  j["interrupted"] = Interrupted();
+  j["pose_ms_median"] = UpperMedian(ms);
+  j["fps"] = fps;
+  AddRunTimes(times, &j);
+  j["ground_truth"] = nullptr;
   if (!input.groundtruth.empty() && traj.size() >= 3) {
     // The map is the ground truth's, so the estimate is in its frame already: no alignment.
     eval::EvalOptions eo;
@@ -173,7 +221,13 @@ void Run(const RunArgs& a) {
     const auto err = eval::EvaluateTrajectory(input.groundtruth, traj, eo);
     line += fmt::format(" trans_mean_m={:.6g} rot_mean_deg={:.6g} ate_rmse={:.6g}", err.ate_m.mean, err.rot_deg.mean,
                         err.ate_m.rmse);
+    j["ground_truth"] = {{"alignment", "none"},
+                         {"ate_rmse_m", err.ate_m.rmse},
+                         {"trans_mean_m", err.ate_m.mean},
+                         {"rot_mean_deg", err.rot_deg.mean}};
   }
+  line += RunTimesFields(times);
+  WriteReportJson((std::filesystem::path(a.out) / "report.json").string(), j);
   fmt::print("{}\n", line);
   if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
 }

@@ -503,6 +503,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   bool was_lost = false;
   int64_t frames_processed = 0, frames_read = 0;
   Progress progress(last >= 0 ? std::optional<int64_t>(last) : std::nullopt);
+  const RunClock clock;  // wall and process CPU time of the frames' processing
   const auto t_start = Clock::now();
   auto elapsed_s = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
 
@@ -620,7 +621,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   } catch (const std::exception& e) {
     failure = e.what();  // outputs first, then the error
   }
-  const double wall_s = elapsed_s();
+  const RunTimes times = clock.Elapsed();
+  const double wall_s = times.wall_s;
   progress.Update(frames_processed, rows.empty() ? 0 : rows.back().index, tracked, lost, system.map().points().size(),
                   frames_processed / std::max(wall_s, 1e-9), true);
   progress.Clear();
@@ -755,7 +757,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);
   j["interrupted"] = interrupted;
-  j["wall_s"] = wall_s;
+  AddRunTimes(times, &j);
   j["fps"] = sum.fps;
   j["frontend"] = {{"mean_features", frames_processed > 0 ? features_sum / frames_processed : 0.0},
                    {"remap_requests", remap_requests},
@@ -801,13 +803,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     j["ground_truth"] = nullptr;
   }
   j["error"] = failure.empty() ? nlohmann::json(nullptr) : nlohmann::json(failure);
-  {
-    const std::string path = (out / "report.json").string();
-    std::ofstream f(path);
-    if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
-    f << j.dump(2) << "\n";
-    if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
-  }
+  WriteReportJson((out / "report.json").string(), j);
 
   if (!options.plot_path.empty()) {
     std::vector<Eigen::Vector3d> ref, est;
@@ -832,6 +828,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     line += fmt::format(" ate_rmse={:.6g} ate_mean={:.6g} rot_mean_deg={:.6g} rpe_trans_rmse={:.6g} scale={:.6g}",
                         errors->ate_m.rmse, errors->ate_m.mean, errors->rot_deg.mean, errors->rpe_trans_m.rmse,
                         errors->alignment_result.gt_world_from_est_world.scale);
+  line += RunTimesFields(times);
   fmt::print("{}\n", line);
   std::fflush(stdout);
 

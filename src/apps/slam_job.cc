@@ -1,6 +1,5 @@
 #include "apps/slam_job.h"
 
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -22,7 +21,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   }
   SlamRunResult res;
   ReportLog log;
-  const auto t0 = std::chrono::steady_clock::now();
+  const RunClock clock;
   for (const slam::FrameObservations& f : input.frames) {
     if (stop && stop()) break;
     for (const slam::FrameReport& r : system.Process(f)) {
@@ -31,7 +30,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
     }
   }
   res.reports = std::move(log.reports);
-  res.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  res.times = clock.Elapsed();
   res.initialised = system.initialised();
   for (const slam::MapPoint& p : system.map().points()) {
     if (p.state == slam::PointState::kRemoved) continue;
@@ -76,6 +75,13 @@ io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports
     t.world_from_cam.push_back((smoothed ? r.smoothed_cam_from_world : r.cam_from_world).Inverse());
   }
   return t;
+}
+
+void WriteReportJson(const std::string& path, const nlohmann::json& report) {
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
+  f << report.dump(2) << "\n";
+  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
 }
 
 void WriteSlamFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,

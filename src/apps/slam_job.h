@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "apps/known_map_job.h"
+#include "apps/run_timing.h"
 #include "eval/trajectory_eval.h"
 #include "io/ply.h"
 #include "slam/system.h"
@@ -27,7 +28,7 @@ struct SlamRunResult {
   std::vector<slam::FrameReport> reports;  // one per frame, in order (the final report of each)
   bool initialised = false;
   io::PointCloud map;                       // active and lost points, with ids
-  double wall_s = 0;
+  RunTimes times;                           // wall and process CPU time of the frames' processing
 };
 
 // Runs the System over every frame. gt_scale: the first baseline takes its length from the ground truth.
@@ -43,6 +44,9 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
 std::function<std::optional<double>(double, double)> BaselineOracle(const io::Trajectory& groundtruth);
 
 io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports, bool smoothed);
+
+// Writes a run report (report.json) to `path`; throws naming the file when it cannot.
+void WriteReportJson(const std::string& path, const nlohmann::json& report);
 
 // frames.csv: index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,
 // reproj_mean_px,reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,note

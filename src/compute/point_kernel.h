@@ -41,7 +41,8 @@ class PointKernel {
   virtual ~PointKernel() = default;
   virtual BackendKind kind() const = 0;
   // Scores samples 0 .. samples-1 of every point (sample i from columns 0-2 of row i of `normals`) and
-  // writes the best of each point to best[p]. Ties go to the lowest index.
+  // writes the best of each point to best[p]. Ties go to the lowest index. A point none of whose samples has
+  // a finite score (only possible with an infinite cap) gets index -1, score +infinity, position untouched.
   virtual void Score(const PointAdjustProblem& problem, const NormalTable& normals, int samples, PointBest* best) = 0;
 };
 

@@ -1,9 +1,11 @@
 #pragma once
-// A synthetic scoring problem for benchmarks and backend-equivalence tests: `count` points on a 1 m object
-// about 3 m in front of an identity camera (the paper's set-up), features at their exact projections.
+// Synthetic scoring problems for benchmarks and backend-equivalence tests. PoseFixture: `count` points on a
+// 1 m object about 3 m in front of an identity camera (the paper's set-up), features at their exact
+// projections. PointFixture (below): points seen by keyframes on an arc.
 #include <cmath>
 #include <vector>
 
+#include "compute/point_kernel.h"
 #include "compute/pose_kernel.h"
 #include "core/random.h"
 
@@ -31,21 +33,75 @@ struct PoseFixture {
   }
 };
 
-// Keyframes for point-kernel tests and benchmarks: five cameras 3 m from the origin, looking at it from a
-// 7-degree arc (rotations of -0.06 .. 0.06 rad about y), with f = 500 px and a 50 px cap.
+// Keyframes for point-kernel tests and benchmarks: `count` cameras 3 m from the origin, looking at it from an
+// arc (rotations about y, 0.03 rad apart and centred on 0: five cameras span -0.06 .. 0.06 rad), with
+// f = 500 px and a 50 px cap.
 struct ArcCameras {
   std::vector<ScaledPose> poses;
   PoseScoringParams params;
 
-  ArcCameras() {
+  explicit ArcCameras(int count = 5) {
     params.fx = params.fy = 500.0f;
     params.max_distance_px = 50.0f;
-    for (int i = 0; i < 5; ++i) {
-      const float a = 0.03f * (i - 2);
+    for (int i = 0; i < count; ++i) {
+      const float a = 0.03f * (static_cast<float>(i) - 0.5f * static_cast<float>(count - 1));
       const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
       const float t[3] = {0.0f, 0.0f, 3.0f};
       poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
     }
+  }
+  // The exact observation of a world point in camera k (undistorted px minus the principal point).
+  void Observe(int k, const float X[3], float* u, float* v) const {
+    const ScaledPose& p = poses[k];
+    const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
+    const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
+    const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
+    *u = x / z, *v = y / z;
+  }
+};
+
+// A point-adjustment problem on the ArcCameras: `num_points` points within 0.3 m of the origin, each centre a
+// few cm off the truth (spread 3, 3, 5 cm) and its observations up to 1.5 px off the exact projections.
+// Point p is seen by the first views(p) cameras: all of them (kAll: the shape of a point adjustment over a
+// keyframe window, what `mcslam bench points` times), or p % (cameras + 1) of them (kVarying: some points by
+// none, for the backend-equivalence tests). Observations before first_obs belong to no point (obs_begin
+// need not start at 0).
+struct PointFixture : ArcCameras {
+  enum class Views { kAll, kVarying };
+  std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
+  std::vector<int> begin{0}, pose_idx;
+
+  explicit PointFixture(int num_points, int cameras = 5, Views views = Views::kVarying, int first_obs = 0,
+                        uint64_t seed = 11)
+      : ArcCameras(cameras) {
+    for (int o = 0; o < first_obs; ++o) pose_idx.push_back(0), ou.push_back(0), ov.push_back(0);
+    begin[0] = first_obs;
+    CounterRng rng(seed, 0);
+    const auto uni = [&rng] { return static_cast<float>(rng.Uniform(-1.0, 1.0)); };
+    for (int p = 0; p < num_points; ++p) {
+      const float X[3] = {0.3f * uni(), 0.3f * uni(), 0.3f * uni()};
+      cx.push_back(X[0] + 0.03f * uni()), cy.push_back(X[1] + 0.03f * uni()), cz.push_back(X[2] + 0.03f * uni());
+      sx.push_back(0.03f), sy.push_back(0.03f), sz.push_back(0.05f);
+      const int seen_by = views == Views::kAll ? cameras : p % (cameras + 1);
+      for (int k = 0; k < seen_by; ++k) {
+        float u, v;
+        Observe(k, X, &u, &v);
+        pose_idx.push_back(k), ou.push_back(u + 1.5f * uni()), ov.push_back(v + 1.5f * uni());
+      }
+      begin.push_back(static_cast<int>(pose_idx.size()));
+    }
+  }
+  int observations() const { return begin.back() - begin.front(); }
+  PointAdjustProblem Problem() const {
+    PointAdjustProblem pr;
+    pr.poses = poses.data();
+    pr.num_poses = static_cast<int>(poses.size());
+    pr.cx = cx.data(), pr.cy = cy.data(), pr.cz = cz.data(), pr.sx = sx.data(), pr.sy = sy.data(), pr.sz = sz.data();
+    pr.obs_begin = begin.data();
+    pr.num_points = static_cast<int>(cx.size());
+    pr.obs_pose = pose_idx.data(), pr.obs_u = ou.data(), pr.obs_v = ov.data();
+    pr.params = params;
+    return pr;
   }
 };
 

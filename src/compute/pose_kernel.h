@@ -52,7 +52,8 @@ class PoseKernel {
   virtual ~PoseKernel() = default;
   virtual BackendKind kind() const = 0;
   // Scores hypotheses 0 .. count-1 (count <= normals.count()), hypothesis i made by PerturbPose from row i.
-  // Returns the lowest score; ties go to the lowest index, so the result does not depend on threading.
+  // Returns the lowest score; ties go to the lowest index, so the result does not depend on threading. No
+  // winner (index -1, score +infinity) when no score is finite (only possible with an infinite cap).
   // When all_scores is not null it receives every score (count floats).
   virtual BestHypothesis Score(const PoseSampling& sampling, const PoseScoringPoints& points,
                                const PoseScoringParams& params, const NormalTable& normals, int count,

@@ -2,15 +2,16 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <regex>
 #include <string>
 
 #include "../test_util.h"
+#include "cli_report.h"
 #include "io/trajectory_io.h"
 
 namespace mcslam {
 namespace {
 
+using testing::Field;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
@@ -42,12 +43,6 @@ io::Trajectory MoveBySim3(const io::Trajectory& gt) {
   return est;
 }
 
-// The value of `key=` in the summary line, NaN when absent.
-double Field(const std::string& output, const std::string& key) {
-  std::smatch m;
-  if (!std::regex_search(output, m, std::regex("(^|\\s)" + key + "=([^\\s]+)"))) return std::nan("");
-  return std::stod(m[2].str());
-}
 
 TEST(CliEval, Sim3MovedCopyHasZeroAte) {
   TempDir dir;

@@ -19,6 +19,7 @@
 #include "io/camera_io.h"
 #include "io/ply.h"
 #include "io/trajectory_io.h"
+#include "cli_report.h"
 #include "test_util.h"
 
 namespace mcslam {
@@ -27,6 +28,7 @@ namespace {
 namespace fs = std::filesystem;
 using testing::DataDir;
 using testing::CountDataLines;
+using testing::ReadJson;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
@@ -153,11 +155,6 @@ std::string WriteImageFolder(const TempDir& dir, const std::string& name, bool w
   return folder.string();
 }
 
-nlohmann::json ReadJson(const std::string& path) {
-  std::ifstream f(path);
-  return nlohmann::json::parse(f);
-}
-
 // ---- the rendered sequences ------------------------------------------------------------------------------
 
 TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
@@ -190,6 +187,7 @@ TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
     EXPECT_GT(j["stages_ms"][stage]["median_ms"].get<double>(), 0.0) << stage;
   }
   EXPECT_GT(j["fps"].get<double>(), 0.0);
+  testing::ExpectSaneRunTimes(r.output, out + "/report.json");
   // The camera slides 1.8 m through a room 6 m deep; rendered, noise-free frames. Measured ATE 5 mm; 2 cm is
   // well below what a wrong initialisation or a lost scale gives (tens of cm).
   ASSERT_TRUE(j["ground_truth"].contains("ate_m")) << j["ground_truth"].dump();

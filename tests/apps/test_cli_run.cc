@@ -1,10 +1,13 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 #include "io/ply.h"
 #include "io/trajectory_io.h"
+#include "cli_report.h"
 #include "test_util.h"
 #include <filesystem>
 
@@ -12,6 +15,8 @@ namespace mcslam {
 namespace {
 
 using testing::CountDataLines;
+using testing::ExpectSaneRunTimes;
+using testing::Field;
 using testing::ReadText;
 using testing::RunMcslam;
 using testing::TempDir;
@@ -27,6 +32,11 @@ TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
   EXPECT_EQ(est.size(), 40u);
   EXPECT_EQ(smooth.size(), 40u);
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 41);  // header + 40 frames
+  ExpectSaneRunTimes(r.output, dir / "r/report.json");
+  const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
+  EXPECT_EQ(j["mode"], "known_map");
+  EXPECT_EQ(j["frames"], 40);
+  EXPECT_EQ(j["options"]["backend"], "cpu");
   // mcslam eval on the output: the paper's bounds hold on this short run too (2 cm, 1 degree).
   const auto e = RunMcslam("eval " + dir / "s/groundtruth.txt " + dir / "r/trajectory.txt --align none");
   ASSERT_EQ(e.exit_code, 0) << e.output;
@@ -104,6 +114,13 @@ TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 61);
   EXPECT_NE(csv.find("trans_err_m"), std::string::npos);
   EXPECT_NE(csv.find("initialised from frames"), std::string::npos);
+  ExpectSaneRunTimes(r.output, dir / "r/report.json");
+  const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
+  EXPECT_EQ(j["mode"], "slam");
+  EXPECT_EQ(j["tracked"], 60);
+  EXPECT_TRUE(j["initialised"].get<bool>());
+  const double trans_mean = j["ground_truth"]["trans_mean_m"];
+  EXPECT_NEAR(Field(r.output, "trans_mean_m"), trans_mean, 1e-5 * trans_mean);  // 6 significant digits printed
   // Clean data: the paper's bounds with a wide margin (measured ~2 mm / 0.05 deg).
   const double ate = std::stod(r.output.substr(r.output.find("trans_mean_m=") + 13));
   EXPECT_LT(ate, 0.01);
@@ -160,10 +177,40 @@ TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   EXPECT_GT(std::stod(r.output.substr(at + 12)), 1e6);  // any working kernel does far more than 1e6/s
 }
 
+TEST(CliBench, PointsPrintsLatencyAndEvaluationsPerSecond) {
+  const auto r = RunMcslam("bench points --points 50 --samples 4096 --window 6 --repeats 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_NE(r.output.find("bench points backend=cpu threads="), std::string::npos) << r.output;
+  EXPECT_EQ(Field(r.output, "observations"), 300.0) << r.output;  // every point seen by every keyframe
+  const double ms = Field(r.output, "call_ms_median"), min_ms = Field(r.output, "call_ms_min");
+  const double evals = Field(r.output, "evals_per_s");
+  EXPECT_GT(ms, 0.0) << r.output;
+  EXPECT_LE(min_ms, ms) << r.output;
+  // samples x observations per call over the median call. Tolerance: the rounding of the printed figures
+  // (evals to 4 significant digits: 5e-4 relative; ms to 3 decimals: 5e-4 ms absolute).
+  EXPECT_NEAR(evals, 4096.0 * 300 / (ms * 1e-3), evals * (5e-4 + 5e-4 / ms)) << r.output;
+  EXPECT_GT(evals, 1e6);  // any working kernel does far more than 1e6/s
+  // Several sizes: one line each, in order.
+  const auto two = RunMcslam("bench points --points 10 20 --samples 256 --window 3 --repeats 1");
+  ASSERT_EQ(two.exit_code, 0) << two.output;
+  const size_t a = two.output.find("points=10 keyframes=3 observations=30 "), b = two.output.find("points=20 keyframes=3 observations=60 ");
+  EXPECT_NE(a, std::string::npos) << two.output;
+  EXPECT_NE(b, std::string::npos) << two.output;
+  EXPECT_LT(a, b);
+  const auto bad = RunMcslam("bench points --window 0");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--window"), std::string::npos) << bad.output;
+}
+
 TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {
-  const auto r = RunMcslam("bench pose --hypotheses 1024 --backend cuda");
-  if (r.exit_code == 0) GTEST_SKIP() << "a CUDA device is present";
-  EXPECT_NE(r.output.find("--backend cuda"), std::string::npos) << r.output;
+  for (const std::string cmd : {"bench pose --hypotheses 1024 --backend cuda", "bench pose --hypotheses 1024 --compare",
+                                "bench points --points 10 --backend cuda", "bench points --points 10 --compare"}) {
+    const auto r = RunMcslam(cmd);
+    if (r.exit_code == 0) GTEST_SKIP() << "a CUDA device is present";
+    EXPECT_NE(r.output.find("--backend cuda"), std::string::npos) << cmd << ": " << r.output;
+    // The error comes before anything is timed: no figure of the CPU either.
+    EXPECT_EQ(r.output.find("backend=cpu"), std::string::npos) << cmd << ": " << r.output;
+  }
 }
 
 }  // namespace

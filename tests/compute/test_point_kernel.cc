@@ -15,20 +15,8 @@ constexpr double kRel = 1e-4;  // hardware rsqrt estimate, |rel err| < 2^-14, pl
 constexpr double kRel = 5e-4;  // AVX rsqrt estimate, |rel err| < 1.5 * 2^-12
 #endif
 
-// The fixture's five cameras on an arc around the origin, and points near the origin.
-struct Scene : ArcCameras {
-  // Observation (undistorted px minus principal point) of a world point in camera k.
-  void Observe(int k, const float X[3], float* u, float* v) const {
-    const ScaledPose& p = poses[k];
-    const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
-    const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
-    const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
-    *u = x / z, *v = y / z;
-  }
-};
-
 TEST(PointKernelCpu, FindsTheTruePointAndMatchesTheScalarReference) {
-  const Scene sc;
+  const ArcCameras sc;  // five cameras on an arc, points near the origin
   const float truth[2][3] = {{0.1f, -0.05f, 0.2f}, {-0.2f, 0.1f, -0.1f}};
   // Start 3 cm off along each axis; spread 3 cm.
   std::vector<float> cx, cy, cz, sx(2, 0.03f), sy(2, 0.03f), sz(2, 0.03f), ou, ov;
@@ -74,7 +62,7 @@ TEST(PointKernelCpu, FindsTheTruePointAndMatchesTheScalarReference) {
 }
 
 TEST(PointKernelCpu, CentreWinsWhenItIsExact) {
-  const Scene sc;
+  const ArcCameras sc;  // five cameras on an arc, points near the origin
   const float X[3] = {0.05f, 0.02f, -0.1f};
   std::vector<float> cx{X[0]}, cy{X[1]}, cz{X[2]}, s{0.02f}, ou, ov;
   std::vector<int> begin{0, 5}, pose_idx;

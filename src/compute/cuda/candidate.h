@@ -46,6 +46,21 @@ MCSLAM_HOST_DEVICE MCSLAM_INLINE Candidate NoCandidate() {
 #endif
 }
 
+// A scored row as the reductions take it: a score that is not below +infinity (infinite, or NaN) is no
+// candidate at all. The CPU backend keeps a score only when it is below the best so far, starting from
+// +infinity, so where every score is infinite or NaN it has no winner (index -1: "no finite hypothesis
+// score", and the tracker calls the frame lost); the device must not make one up either.
+MCSLAM_HOST_DEVICE MCSLAM_INLINE Candidate Scored(float score, int index) {
+#if defined(__CUDA_ARCH__)
+  return score < __int_as_float(0x7f800000) ? Candidate{score, index} : NoCandidate();
+#else
+  return score < std::numeric_limits<float>::infinity() ? Candidate{score, index} : NoCandidate();
+#endif
+}
+
+// True for the result of a reduction that saw no candidate.
+MCSLAM_HOST_DEVICE MCSLAM_INLINE bool IsNoCandidate(const Candidate& c) { return c.index == INT_MAX; }
+
 struct BestOfOp {
   MCSLAM_HOST_DEVICE MCSLAM_INLINE Candidate operator()(const Candidate& a, const Candidate& b) const {
     return BestOf(a, b);

@@ -24,7 +24,10 @@ std::string CudaDeviceDescription() {
   }
   if (n == 0) return "no CUDA device present";
   cudaDeviceProp prop{};
-  cudaGetDeviceProperties(&prop, 0);
+  if (const cudaError_t perr = cudaGetDeviceProperties(&prop, 0); perr != cudaSuccess) {
+    cudaGetLastError();
+    return std::to_string(n) + " CUDA device(s), but device 0 cannot be queried: " + cudaGetErrorString(perr);
+  }
   return std::string(prop.name) + " (sm_" + std::to_string(prop.major) + std::to_string(prop.minor) + ", " +
          std::to_string(prop.totalGlobalMem >> 20) + " MiB)";
 }

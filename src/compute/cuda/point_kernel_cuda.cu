@@ -63,7 +63,7 @@ __global__ void __launch_bounds__(kPointBlock)
       const ScaledPose pose = poses[obs_pose[o]];
       acc += ReprojectionDistanceT<ScalarMath, float, float, float>(pose, z[0], z[1], z[2], obs_u[o], obs_v[o], k, cap);
     }
-    best = BestOf(best, Candidate{acc, i});
+    best = BestOf(best, Scored(acc, i));  // an infinite or NaN score is no candidate (candidate.h)
   }
   best = BlockReduce(reduce_storage).Reduce(best, BestOfOp{});
   if (threadIdx.x == 0) best_out[p] = best;
@@ -146,6 +146,11 @@ class CudaPointKernel final : public PointKernel {
 
     for (int p = 0; p < pr.num_points; ++p) {
       const Candidate c = h_best[p];
+      if (IsNoCandidate(c)) {  // every sample's score infinite or NaN: no winner, position untouched (as the CPU)
+        best[p].index = -1;
+        best[p].score = std::numeric_limits<float>::infinity();
+        continue;
+      }
       if (c.index < 0 || c.index >= samples)
         throw std::runtime_error("CUDA point kernel: the reduction returned sample " + std::to_string(c.index) +
                                  " of " + std::to_string(samples) + " for point " + std::to_string(p));

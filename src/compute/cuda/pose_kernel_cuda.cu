@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -50,7 +51,8 @@ std::mutex& ConstantPointsMutex() {
 
 // Scores hypotheses [blockIdx.x * kPoseBlock, +kPoseBlock) of `count`; writes each score to scores[h]
 // when scores is not null, and the block's best to block_best[blockIdx.x]. Threads past `count` score row
-// 0 (valid memory) and take part in the tiles and the reduction, but their result is NoCandidate.
+// 0 (valid memory) and take part in the tiles and the reduction, but their result is NoCandidate, as is a
+// score that is infinite or NaN (candidate.h: Scored).
 template <bool kConstantPoints>
 __global__ void __launch_bounds__(kPoseBlock)
     ScorePosesKernel(const PoseSampling s, const PoseScoringParams k, const float* __restrict__ normals,
@@ -100,7 +102,7 @@ __global__ void __launch_bounds__(kPoseBlock)
   }
 
   if (active && scores != nullptr) scores[h] = acc;
-  const Candidate mine = active ? Candidate{acc, h} : NoCandidate();
+  const Candidate mine = active ? Scored(acc, h) : NoCandidate();
   const Candidate best = BlockReduce(reduce_storage).Reduce(mine, BestOfOp{});
   if (threadIdx.x == 0) block_best[blockIdx.x] = best;
 }
@@ -216,6 +218,10 @@ class CudaPoseKernel final : public PoseKernel {
     ++r.calls;
 
     const Candidate best = *h_best;
+    if (IsNoCandidate(best)) {  // every score infinite or NaN: no winner, as on the CPU
+      result.score = std::numeric_limits<float>::infinity();
+      return result;
+    }
     if (best.index < 0 || best.index >= count)
       throw std::runtime_error("CUDA pose kernel: the reduction returned hypothesis " + std::to_string(best.index) +
                                " of " + std::to_string(count));
