@@ -106,9 +106,11 @@ void RunFullSlam(const RunArgs& a) {
                                  res.reports.size(), tracked, lost, waiting, keyframes, res.map.points.size(),
                                  UpperMedian(ms), res.reports.size() / std::max(res.wall_s, 1e-9));
   if (err)
-    line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} scale={:.6g}", err->ate_m.rmse,
-                        err->ate_m.mean, err->rot_deg.mean, err->alignment_result.gt_world_from_est_world.scale);
+    line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} rpe_rot_mean_deg={:.6g} scale={:.6g}",
+                        err->ate_m.rmse, err->ate_m.mean, err->rot_deg.mean, err->rpe_rot_deg.mean,
+                        err->alignment_result.gt_world_from_est_world.scale);
   if (!res.reports.empty()) line += fmt::format(" final_reproj_mean_px={:.4f}", res.reports.back().reproj_mean_px);
+  line += fmt::format(" wall_s={:.3f}", res.wall_s);
   fmt::print("{}\n", line);
   if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
   if (!res.initialised)
