@@ -135,13 +135,15 @@ void RunFullSlam(const RunArgs& a) {
   AddRunTimes(res.times, &j);
   j["ground_truth"] = nullptr;
   if (err) {
-    line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} scale={:.6g}", err->ate_m.rmse,
-                        err->ate_m.mean, err->rot_deg.mean, err->alignment_result.gt_world_from_est_world.scale);
+    line += fmt::format(" ate_rmse={:.6g} trans_mean_m={:.6g} rot_mean_deg={:.6g} rpe_rot_mean_deg={:.6g} scale={:.6g}",
+                        err->ate_m.rmse, err->ate_m.mean, err->rot_deg.mean, err->rpe_rot_deg.mean,
+                        err->alignment_result.gt_world_from_est_world.scale);
     j["ground_truth"] = {{"alignment", "sim3"},
                          {"scale", err->alignment_result.gt_world_from_est_world.scale},
                          {"ate_rmse_m", err->ate_m.rmse},
                          {"trans_mean_m", err->ate_m.mean},
-                         {"rot_mean_deg", err->rot_deg.mean}};
+                         {"rot_mean_deg", err->rot_deg.mean},
+                         {"rpe_rot_mean_deg", err->rpe_rot_deg.mean}};
   }
   if (!res.reports.empty()) line += fmt::format(" final_reproj_mean_px={:.4f}", res.reports.back().reproj_mean_px);
   line += RunTimesFields(res.times);

@@ -733,6 +733,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                  {"origin", data.camera_origin}};
   j["notes"] = data.notes;
   j["options"] = {{"backend", backend},
+                  {"pose", sys_opts.pose_method == slam::PoseMethod::kPnp ? "pnp" : "mc"},
+                  {"structure", sys_opts.structure_method == slam::StructureMethod::kBundleAdjustment ? "ba" : "mc"},
+                  {"ba_iterations", sys_opts.ba_iterations},
                   {"hypotheses", sys_opts.tracker.hypotheses},
                   {"rounds", sys_opts.tracker.rounds},
                   {"seed", sys_opts.seed},

@@ -3,10 +3,12 @@
 // wall, left wall), ray-cast per pixel, so the ground truth is exact.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
@@ -324,35 +326,98 @@ std::string RealSequence(const std::string& name) {
   return (fs::path(data) / name).string();
 }
 
+// The folder of a real sequence in `var`, or the test skipped (visibly) when it is not there.
+#define REAL_SEQUENCE_OR_SKIP(var, name) \
+  const std::string var = RealSequence(name); \
+  if (var.empty()) GTEST_SKIP() << name << " not found (set MCSLAM_DATA or ../shared/data)"
+
+struct RealRun {
+  std::string output;     // what mcslam printed
+  nlohmann::json report;  // its report.json; null when the run failed (a test failure already)
+};
+
+// `mcslam run SEQ --out DIR/o FLAGS`, which must succeed.
+RealRun RunOnRealSequence(const std::string& seq, const TempDir& dir, const std::string& flags) {
+  const auto r = RunMcslam(fmt::format("run {} --out {} {}", seq, dir / "o", flags));
+  if (r.exit_code != 0) {
+    ADD_FAILURE() << "exit code " << r.exit_code << ": " << r.output;
+    return {r.output, nullptr};
+  }
+  return {r.output, ReadJson(dir / "o/report.json")};
+}
+
 TEST(CliImagesReal, Kitti06AllFramesTracked) {
-  const std::string seq = RealSequence("kitti_odometry_06_frames000-050");
-  if (seq.empty()) GTEST_SKIP() << "kitti_odometry_06_frames000-050 not found (set MCSLAM_DATA or ../shared/data)";
+  REAL_SEQUENCE_OR_SKIP(seq, "kitti_odometry_06_frames000-050");
   TempDir dir;
-  const auto r = RunMcslam(fmt::format("run {} --out {} --hypotheses 65536", seq, dir / "o"));
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  const nlohmann::json j = ReadJson(dir / "o/report.json");
-  EXPECT_EQ(j["tracked"], 51) << r.output;  // the target: every frame
+  const RealRun run = RunOnRealSequence(seq, dir, "--hypotheses 65536");
+  if (run.report.is_null()) return;
+  EXPECT_EQ(run.report["tracked"], 51) << run.output;  // the target: every frame
   // The target is 0.10 m. Measured with these flags: 0.055 m (seed 1); 0.048-0.073 m over seeds 1-5
   // (2^18 hypotheses, seeds 1-3: 0.074-0.115 m; the spread is the estimator's, not the budget's).
-  EXPECT_LT(j["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.10) << r.output;
+  EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.10) << run.output;
+}
+
+// The paper's baselines (§8) end to end on real images: PnP for the pose step, local bundle adjustment for the
+// structure step, through the same front end and initialisation as the Monte Carlo steps (scripts/compare.sh).
+TEST(CliImagesReal, Kitti06PnpPoseAndBundleAdjustment) {
+  REAL_SEQUENCE_OR_SKIP(seq, "kitti_odometry_06_frames000-050");
+  TempDir dir;
+  const RealRun run = RunOnRealSequence(seq, dir, "--pose pnp --structure ba");
+  if (run.report.is_null()) return;
+  EXPECT_EQ(run.report["options"]["pose"], "pnp");
+  EXPECT_EQ(run.report["options"]["structure"], "ba");
+  EXPECT_EQ(run.report["tracked"], 51) << run.output;
+  EXPECT_EQ(run.report["lost"], 0);
+  // Measured 0.052 m, the same for seeds 1-5 (neither step samples, and the initialisation came out the same);
+  // the margin is for other CPUs and library versions (OpenCV's RANSAC, Ceres). A bundle adjustment that
+  // drifted or a PnP that failed on a few frames costs more than that (the Monte Carlo steps: 0.048-0.073 m).
+  EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.07) << run.output;
+  // Frame-to-frame rotation, which needs no alignment (the road is straight, so the alignment's rotation about
+  // it is loose): measured 0.044 degrees; 0.1 is twice that, and below the Monte Carlo pose step's 0.076.
+  EXPECT_LT(run.report["ground_truth"]["rpe_rot_deg"]["mean"].get<double>(), 0.1) << run.output;
+  // The structure step was the bundle adjustment: it counts every point of its window as adjusted (measured
+  // 657 a keyframe after the initialisation), where the Monte Carlo step counts the points it re-sampled
+  // (measured 7.5 a keyframe with --structure mc).
+  auto split = [](const std::string& line) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+    return cells;
+  };
+  std::istringstream csv(ReadText(dir / "o/frames.csv"));
+  std::string line;
+  std::getline(csv, line);
+  const std::vector<std::string> header = split(line);
+  auto column = [&](const std::string& name) {
+    return static_cast<size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+  };
+  const size_t keyframe_col = column("keyframe"), init_col = column("init"), adjusted_col = column("adjusted");
+  const size_t last_col = std::max({keyframe_col, init_col, adjusted_col});
+  ASSERT_LT(last_col, header.size()) << line;
+  int keyframes = 0, adjusted = 0;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> cells = split(line);  // a trailing empty note is no cell: hence no == check
+    ASSERT_GT(cells.size(), last_col) << line;
+    if (cells[keyframe_col] == "1" && cells[init_col] == "0") ++keyframes, adjusted += std::stoi(cells[adjusted_col]);
+  }
+  ASSERT_GT(keyframes, 0);
+  EXPECT_GT(adjusted / keyframes, 100) << adjusted << " adjusted over " << keyframes << " keyframes";
 }
 
 TEST(CliImagesReal, SevenScenesRedKitchen) {
-  const std::string seq = RealSequence("7scenes_redkitchen_frames000-299");
-  if (seq.empty()) GTEST_SKIP() << "7scenes_redkitchen_frames000-299 not found (set MCSLAM_DATA or ../shared/data)";
+  REAL_SEQUENCE_OR_SKIP(seq, "7scenes_redkitchen_frames000-299");
   TempDir dir;
   // The colour camera as SOURCE.md recommends (the folder's camera-intrinsics.txt is the depth camera's).
   testing::WriteText(dir / "camera.txt", "525 525 320 240\n");
-  const auto r = RunMcslam(fmt::format("run {} --camera {} --out {} --hypotheses 65536 --min-parallax-deg 8", seq,
-                                       dir / "camera.txt", dir / "o"));
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  const nlohmann::json j = ReadJson(dir / "o/report.json");
-  EXPECT_GE(j["tracked"].get<int>(), 290) << r.output;  // the target; measured: 300
+  const RealRun run =
+      RunOnRealSequence(seq, dir, fmt::format("--camera {} --hypotheses 65536 --min-parallax-deg 8", dir / "camera.txt"));
+  if (run.report.is_null()) return;
+  EXPECT_GE(run.report["tracked"].get<int>(), 290) << run.output;  // the target; measured: 300
   // The target is 0.05 m. Measured with these flags: 0.047 m (seed 1), but 0.042-0.062 m over seeds
   // 1-3: the map's scale drifts on this 10 s hand-held survey (about x1.3 from start to end), so the target is met
   // for some seeds only; the bound is the worst seed measured plus a margin. With the back end's 2 degrees
   // for new points (no --min-parallax-deg) the drift is about x2 and the ATE 0.12-0.13 m.
-  EXPECT_LT(j["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.07) << r.output;
+  EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.07) << run.output;
 }
 
 }  // namespace
