@@ -648,7 +648,10 @@ PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, s
   std::vector<Eigen::Vector3d> P;
   std::vector<Eigen::Vector2d> uv;
   for (const PointObservation& o : obs) P.push_back(o.point_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_undistorted_px));
-  est.scored = static_cast<int>(P.size());
+  // Scored as in the Monte Carlo estimate: the points that were inliers at the last pose (the keyframe rule
+  // compares the inliers with these; counting every observed point made PnP stop making keyframes).
+  est.scored = static_cast<int>(
+      std::count_if(obs.begin(), obs.end(), [](const PointObservation& o) { return o.was_inlier; }));
   geometry::PnpOptions po;
   po.focal_px = focal_px_;
   po.threshold_px = options_.tracker.inlier_threshold_px;
