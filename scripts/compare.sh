@@ -119,7 +119,9 @@ mkdir -p "$DOCS"
   echo "the initialisation, structure step per keyframe (means); run time of the whole \`mcslam run\` (real"
   echo "sequences: decoding and front end included); reprojection: mean inlier residual in the last tracked frame"
   echo "and over the last 30; ATE: RMSE of the camera positions; rotation: mean absolute orientation error after"
-  echo "the alignment; RPE rotation: mean frame-to-frame rotation error, which needs no alignment."
+  echo "the alignment; RPE rotation: mean frame-to-frame rotation error, which needs no alignment. Trajectories are"
+  echo "the online estimates: each frame's pose as it was output when the frame was processed (a keyframe's after its"
+  echo "own structure step); where a later bundle adjustment moves a past keyframe, that is not written back."
   echo
   cat "$DOCS/comparison_sections.md"
   echo
