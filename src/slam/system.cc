@@ -181,13 +181,12 @@ int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoint
 double System::ParallaxFromReference(int slot) const {
   const FrameRecord& ref = map_.frames[reference_slot_];
   const FrameRecord& cur = map_.frames[slot];
-  const Eigen::Vector3d c0 = ref.cam_from_world.OriginOfTargetInSource(), c1 = cur.cam_from_world.OriginOfTargetInSource();
+  const Pose pair[2] = {ref.cam_from_world, cur.cam_from_world};
   std::vector<double> parallax;
   for (const FeatureUndistorted& f : cur.features) {
     const MapPoint* p = map_.Find(f.id);
     if (!p || p->state == PointState::kRemoved || !ref.Find(f.id)) continue;
-    const Eigen::Vector3d a = (p->position_in_world - c0).normalized(), b = (p->position_in_world - c1).normalized();
-    parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
+    parallax.push_back(geometry::ParallaxDeg(pair, p->position_in_world));
   }
   // Too few points shared with the reference to say: the view has moved on, as far as the start can tell.
   if (parallax.size() < static_cast<size_t>(options_.init.min_points)) return std::numeric_limits<double>::infinity();
@@ -238,13 +237,7 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   }
   const FrameRecord& cur = map_.frames[slot];
   StoreAdjustedPoints(cams, wp, cur.index);
-  // The points' inlier flags at the moved current pose (they gate the next frame's score).
-  for (const FeatureUndistorted& f : cur.features)
-    if (MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) {
-      Eigen::Vector2d uv;
-      p->inlier = ideal_.ProjectWorld(cur.cam_from_world, p->position_in_world, &uv) &&
-                  (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
-    }
+  RefreshInlierFlags(slot);  // at the moved current pose
   // The posed frames left out of the adjustment: each placed again against the adjusted points (PnP from
   // the points it sees), or moved with its neighbour in the window when PnP cannot place it.
   geometry::PnpOptions po;
@@ -404,11 +397,8 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     h.median_px = UpperMedian(res);
     // The refined window must still have the parallax asked for (between the first and the last camera).
     std::vector<double> parallax;
-    const Eigen::Vector3d c0 = h.poses.front().OriginOfTargetInSource(), c1 = h.poses.back().OriginOfTargetInSource();
-    for (const Eigen::Vector3d& X : h.points) {
-      const Eigen::Vector3d a = (X - c0).normalized(), b = (X - c1).normalized();
-      parallax.push_back(RadToDeg(std::atan2(a.cross(b).norm(), a.dot(b))));
-    }
+    const Pose ends[2] = {h.poses.front(), h.poses.back()};
+    for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
     const double refined_parallax = UpperMedian(parallax);
     std::vector<double> z;
     for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
@@ -462,12 +452,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   settling_ = io.settle_parallax_deg > 0;
   next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view.median_parallax_deg, 1e-3);
   MarkSeen(cur_slot);
-  for (const FeatureUndistorted& f : cur.features)
-    if (MapPoint* p = map_.Find(f.id)) {
-      Eigen::Vector2d uv;
-      p->inlier = ideal_.ProjectWorld(map_.frames[cur_slot].cam_from_world, p->position_in_world, &uv) &&
-                  (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
-    }
+  RefreshInlierFlags(cur_slot);
   PoseTrackerOptions topts = options_.tracker;
   topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
   tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
@@ -824,6 +809,16 @@ void System::AdjustPoints(int slot, FrameReport* r) {
       ++r->removed;
     }
   }
+}
+
+void System::RefreshInlierFlags(int slot) {
+  const FrameRecord& fr = map_.frames[slot];
+  for (const FeatureUndistorted& f : fr.features)
+    if (MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) {
+      Eigen::Vector2d uv;
+      p->inlier = ideal_.ProjectWorld(fr.cam_from_world, p->position_in_world, &uv) &&
+                  (uv - f.uv_px).norm() < options_.tracker.inlier_threshold_px;
+    }
 }
 
 FrameReport System::PosedReport(int slot) const {

@@ -163,7 +163,10 @@ class System {
                                std::vector<uint8_t>* inl) const;
   std::vector<int> WindowSlots() const;
   void ResidualStats(int slot, FrameReport* r) const;
-  FrameReport PosedReport(int slot) const;  // a tracked frame's report: its pose and residual statistics
+  FrameReport PosedReport(int slot) const;
+  // Each point seen in this posed frame is an inlier when it projects within the inlier threshold of its
+  // feature: the flags gate the next frame's score (§5.2).
+  void RefreshInlierFlags(int slot);  // a tracked frame's report: its pose and residual statistics
   void MarkSeen(int slot);
 
   PinholeCamera camera_;
