@@ -25,10 +25,13 @@ run() {  # name, folder, flags...
   echo "$name: $summary"
 }
 
-run kitti06 kitti_odometry_06_frames000-050 "$@"
+# At 10 Hz forward (KITTI) and at 1 Hz (TUM) a track's look changes fast: one that no longer matches its birth
+# patch takes a new one rather than being dropped. On 7-Scenes the alignment with the birth patch does not
+# help (the error there is the scale drift), so it is off.
+run kitti06 kitti_odometry_06_frames000-050 --anchor-mismatch reanchor "$@"
 # 7-Scenes does not calibrate its colour camera; its camera-intrinsics.txt is the depth camera's (SOURCE.md).
 mkdir -p "$OUT"
 echo "525 525 320 240" > "$OUT/7scenes_camera.txt"
-run 7scenes_redkitchen 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --min-parallax-deg 8 "$@"
-run 7scenes_redkitchen_default 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" "$@"
-run tum_fr3_1hz tum_rgbd_fr3_long_office_household_1hz "$@"
+run 7scenes_redkitchen 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --min-parallax-deg 8 --anchor-every 0 "$@"
+run 7scenes_redkitchen_default 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --anchor-every 0 "$@"
+run tum_fr3_1hz tum_rgbd_fr3_long_office_household_1hz --anchor-mismatch reanchor "$@"

@@ -296,9 +296,10 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
   f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
        "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,features,fe_tracked,fe_detected,"
-       "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_retried,fe_recovered,"
+       "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
+       "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
        "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-       "fe_remap_over_budget,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_detect_ms,"
+       "fe_remap_over_budget,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,"
        "fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms,note\n";
   auto clean = [](std::string s) {
     for (char& c : s)
@@ -307,7 +308,7 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   };
   for (const FrameRow& row : rows) {
     if (row.skipped) {
-      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,,{:.3f},{}\n", row.index,
+      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,,,{:.3f},{}\n", row.index,
                        row.stamp_s, row.decode_ms, row.frame_ms, clean(row.name + ": " + row.error));
       continue;
     }
@@ -319,13 +320,13 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
       te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
     const frontend::FrameStats& s = row.fe;
     f << fmt::format(
-        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
-        "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
+        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
+        "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
         r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
         r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px, r.track_ms, r.map_ms,
         r.adjust_ms, r.init_ms, te, re, row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward,
-        s.lost_patch_error, s.lost_outside, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
-        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.detect_ms, s.remap_ms, s.describe_ms,
+        s.lost_patch_error, s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
+        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms,
         s.describe_wait_ms, s.total_ms, row.frame_ms, clean(r.note));
   }
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
@@ -378,6 +379,20 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
       ->capture_default_str();
   cmd->add_option("--max-features", o->frontend.max_features, "Front end: most tracks at once")->capture_default_str();
+  cmd->add_option("--anchor-every", o->frontend.anchor_every,
+                  "Front end: frames between alignments of each track with the patch it was born with (0: off)")
+      ->capture_default_str();
+  cmd->add_option("--anchor-patch-px", o->frontend.anchor_patch_px, "Front end: side of the patch a track keeps from its birth")
+      ->capture_default_str();
+  cmd->add_option("--anchor-min-correlation", o->frontend.anchor_min_correlation,
+                  "Front end: a track whose birth patch correlates less than this (ECC) is a mismatch")
+      ->capture_default_str();
+  cmd->add_option_function<std::string>(
+         "--anchor-mismatch",
+         [o](const std::string& v) { o->frontend.anchor_reanchor_on_mismatch = v == "reanchor"; },
+         "Front end: a track that no longer matches its birth patch is dropped (drop), or keeps going with a new "
+         "patch (reanchor: fast forward motion such as KITTI's) [default: drop]")
+      ->check(CLI::IsMember({"drop", "reanchor"}));
 }
 
 bool IsImageInput(const std::string& input, const ImageJobOptions& options) {
@@ -686,7 +701,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   sum.frames = frames_processed;
   sum.interrupted = interrupted;
   sum.initialised = system.initialised();
-  Stage decode, fe_convert, fe_pyramid, fe_track, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
+  Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_init, be_total, frame_total;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
           remap_over_budget = 0, remap_refused = 0;
@@ -701,6 +716,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
       continue;
     }
     fe_convert.Add(row.fe.convert_ms), fe_pyramid.Add(row.fe.pyramid_ms), fe_track.Add(row.fe.track_ms);
+    fe_anchor.Add(row.fe.anchor_ms);
     fe_detect.Add(row.fe.detect_ms), fe_remap.Add(row.fe.remap_ms), fe_describe.Add(row.fe.describe_ms);
     fe_wait.Add(row.fe.describe_wait_ms), fe_total.Add(row.fe.total_ms);
     remap_requests += row.fe.remap_requests, remapped += row.fe.remapped;
@@ -777,6 +793,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                     {"frontend_convert", StageJson(fe_convert)},
                     {"frontend_pyramid", StageJson(fe_pyramid)},
                     {"frontend_track", StageJson(fe_track)},
+                    {"frontend_anchor", StageJson(fe_anchor)},
                     {"frontend_detect", StageJson(fe_detect)},
                     {"frontend_remap", StageJson(fe_remap)},
                     {"frontend_describe", StageJson(fe_describe)},

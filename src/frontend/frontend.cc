@@ -2,6 +2,7 @@
 #include "core/median.h"
 
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
@@ -110,7 +111,69 @@ struct Track {
   int age = 0;
   bool remapped = false;
   std::optional<Descriptor> descriptor;
+  // The patch the track was born with (CV_32F, anchor_patch_px square, centred on it) and the affine warp
+  // from patch pixels to image pixels found at the last alignment (linear part only; the translation follows
+  // the track).
+  cv::Mat anchor;
+  cv::Matx22f anchor_linear = cv::Matx22f::eye();
 };
+
+// The patch of `gray` centred at uv (sub-pixel), as floats.
+cv::Mat AnchorPatch(const cv::Mat& gray, const cv::Point2f& uv, int side) {
+  cv::Mat patch;
+  cv::getRectSubPix(gray, cv::Size(side, side), uv, patch, CV_32F);
+  return patch;
+}
+
+enum class AnchorOutcome : uint8_t { kKept, kReanchor, kMismatch };
+
+// Aligns a track's birth patch with `gray` around `uv` (where LK put it) by an affine ECC warp. On success
+// writes the aligned centre and the warp's linear part.
+AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const cv::Mat& anchor, const cv::Point2f& uv,
+                              const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
+  const float c = static_cast<float>(anchor.cols - 1) / 2.0f;
+  const cv::Matx22f& L = *linear;
+  // The warped patch's corners around uv, and the region of the image that can hold it after the alignment.
+  float x0 = uv.x, x1 = uv.x, y0 = uv.y, y1 = uv.y;
+  for (const float sx : {-c, c})
+    for (const float sy : {-c, c}) {
+      const cv::Vec2f d = L * cv::Vec2f(sx, sy);
+      x0 = std::min(x0, uv.x + d[0]), x1 = std::max(x1, uv.x + d[0]);
+      y0 = std::min(y0, uv.y + d[1]), y1 = std::max(y1, uv.y + d[1]);
+    }
+  const float margin = static_cast<float>(o.anchor_max_shift_px) + 3.0f;
+  const cv::Rect box(static_cast<int>(std::floor(x0 - margin)), static_cast<int>(std::floor(y0 - margin)),
+                     static_cast<int>(std::ceil(x1 - x0 + 2 * margin)) + 1,
+                     static_cast<int>(std::ceil(y1 - y0 + 2 * margin)) + 1);
+  // Too near the edge to align: the track keeps its LK position this frame.
+  if ((box & cv::Rect(0, 0, gray.cols, gray.rows)) != box) return AnchorOutcome::kKept;
+  cv::Mat region;
+  gray(box).convertTo(region, CV_32F);
+  // Patch pixel p -> region pixel L (p - c) + uv - box.tl.
+  const cv::Vec2f t = cv::Vec2f(uv.x - static_cast<float>(box.x), uv.y - static_cast<float>(box.y)) - L * cv::Vec2f(c, c);
+  cv::Mat warp = (cv::Mat_<float>(2, 3) << L(0, 0), L(0, 1), t[0], L(1, 0), L(1, 1), t[1]);
+  double rho = 0;
+  try {
+    rho = cv::findTransformECC(anchor, region, warp, cv::MOTION_AFFINE,
+                               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-4),
+                               cv::noArray(), 1);
+  } catch (const cv::Exception&) {
+    return AnchorOutcome::kMismatch;  // ECC diverged: the patch is not there
+  }
+  const cv::Matx22f Ln(warp.at<float>(0, 0), warp.at<float>(0, 1), warp.at<float>(1, 0), warp.at<float>(1, 1));
+  const cv::Vec2f centre = Ln * cv::Vec2f(c, c) + cv::Vec2f(warp.at<float>(0, 2), warp.at<float>(1, 2));
+  const cv::Point2f p(centre[0] + static_cast<float>(box.x), centre[1] + static_cast<float>(box.y));
+  if (!(rho >= o.anchor_min_correlation) || !(cv::norm(p - uv) <= o.anchor_max_shift_px)) return AnchorOutcome::kMismatch;
+  *aligned = p;
+  *linear = Ln;
+  // Singular values of the linear part: how much the patch grew, shrank or was sheared since birth.
+  cv::Vec2f w;
+  cv::Matx22f u, vt;
+  cv::SVD::compute(Ln, w, u, vt);
+  const double smax = std::max(w[0], w[1]), smin = std::min(w[0], w[1]);
+  const double k = o.anchor_max_scale_change;
+  return (smax > k || smin < 1.0 / k || smax > k * smin) ? AnchorOutcome::kReanchor : AnchorOutcome::kKept;
+}
 
 struct Candidate {
   cv::Point2f uv;
@@ -153,6 +216,15 @@ void FrontendOptions::Check() const {
   if (std::isnan(max_patch_error)) fail("max_patch_error must be a number (<= 0 turns the check off)");
   if (retry_pyramid_levels < 0 || retry_pyramid_levels > 8)
     fail(fmt::format("retry_pyramid_levels must be in [0, 8] (got {})", retry_pyramid_levels));
+  if (anchor_every < 0) fail(fmt::format("anchor_every must be >= 0 (got {})", anchor_every));
+  if (anchor_patch_px < 7 || anchor_patch_px % 2 == 0)
+    fail(fmt::format("anchor_patch_px must be odd and >= 7 (got {})", anchor_patch_px));
+  if (!(anchor_min_correlation > -1 && anchor_min_correlation < 1))
+    fail(fmt::format("anchor_min_correlation must be in (-1, 1) (got {})", anchor_min_correlation));
+  if (!(anchor_max_shift_px > 0) || !std::isfinite(anchor_max_shift_px))
+    fail(fmt::format("anchor_max_shift_px must be positive (got {})", anchor_max_shift_px));
+  if (!(anchor_max_scale_change > 1) || !std::isfinite(anchor_max_scale_change))
+    fail(fmt::format("anchor_max_scale_change must be > 1 (got {})", anchor_max_scale_change));
   if (track_border_px < 0) fail(fmt::format("track_border_px must be >= 0 (got {})", track_border_px));
   if (!(kalman_accel_sigma_px > 0) || !std::isfinite(kalman_accel_sigma_px))
     fail(fmt::format("kalman_accel_sigma_px must be positive (got {})", kalman_accel_sigma_px));
@@ -252,11 +324,11 @@ struct Frontend::Impl {
     return {Eigen::Vector2d(UpperMedian(vu), UpperMedian(vv)), kVelocitySigmaFromNeighboursPx};
   }
 
-  void TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameResult* result);
+  void TrackFeatures(const cv::Mat& gray, const std::vector<cv::Mat>& pyramid, FrameResult* result);
   void DetectAndRemap(const cv::Mat& gray, std::span<const RemapRequest> remap, FrameResult* result);
 };
 
-void Frontend::Impl::TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameResult* result) {
+void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Mat>& pyramid, FrameResult* result) {
   FrameStats& st = result->stats;
   const size_t n = tracks.size();
   if (n == 0 || prev_pyramid.empty()) return;
@@ -280,7 +352,7 @@ void Frontend::Impl::TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameRes
         o.use_kalman_prediction ? cv::Point2f(static_cast<float>(pred.x()), static_cast<float>(pred.y())) : p0[i]);
   }
 
-  enum Outcome : uint8_t { kOk, kOutside, kStatus, kForwardBackward };
+  enum Outcome : uint8_t { kOk, kOutside, kStatus, kForwardBackward, kAnchor };
   std::vector<cv::Point2f> p1(n);
   std::vector<float> err(n, 0.0f);
   std::vector<uint8_t> outcome(n, kStatus);
@@ -344,6 +416,40 @@ void Frontend::Impl::TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameRes
     }
   }
 
+  // Alignment with the birth patches (each track on its own: in parallel, the result independent of the order).
+  const auto t_anchor = Clock::now();
+  std::vector<uint8_t> reanchor(n, 0);
+  if (o.anchor_every > 0) {
+    std::vector<size_t> due;
+    for (size_t i = 0; i < n; ++i)
+      if (outcome[i] == kOk && !tracks[i].anchor.empty() && (tracks[i].age + 1) % o.anchor_every == 0) due.push_back(i);
+    std::vector<cv::Point2f> before(due.size());
+    for (size_t k = 0; k < due.size(); ++k) before[k] = p1[due[k]];
+    tbb::parallel_for(size_t{0}, due.size(), [&](size_t k) {
+      const size_t i = due[k];
+      cv::Point2f aligned = p1[i];  // unchanged where the patch cannot be aligned (too near the edge)
+      const AnchorOutcome a = AlignWithAnchor(gray, tracks[i].anchor, p1[i], o, &aligned, &tracks[i].anchor_linear);
+      if (a == AnchorOutcome::kMismatch) {
+        // Either the track goes, or it stays where LK put it and takes a new patch there.
+        if (o.anchor_reanchor_on_mismatch)
+          reanchor[i] = 1;
+        else
+          outcome[i] = kAnchor;
+        return;
+      }
+      if (a == AnchorOutcome::kReanchor) reanchor[i] = 1;
+      p1[i] = aligned;
+    });
+    double sum_shift = 0;
+    for (size_t k = 0; k < due.size(); ++k) {
+      if (outcome[due[k]] != kOk) continue;
+      ++st.anchored;
+      sum_shift += cv::norm(p1[due[k]] - before[k]);
+    }
+    if (st.anchored > 0) st.mean_anchor_shift_px = sum_shift / st.anchored;
+  }
+  st.anchor_ms = MsSince(t_anchor);
+
   std::vector<Track> kept;
   kept.reserve(n);
   double sum_pred = 0, sum_disp = 0;
@@ -356,6 +462,8 @@ void Frontend::Impl::TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameRes
       ++st.lost_status;
     } else if (outcome[i] == kForwardBackward) {
       ++st.lost_forward_backward;
+    } else if (outcome[i] == kAnchor) {
+      ++st.lost_anchor;
     } else if (o.max_patch_error > 0 && err[i] > o.max_patch_error) {
       ++st.lost_patch_error;
     } else {
@@ -369,6 +477,11 @@ void Frontend::Impl::TrackFeatures(const std::vector<cv::Mat>& pyramid, FrameRes
     sum_disp += cv::norm(p1[i] - p0[i]);
     t.kf.Update(ToEigen(p1[i]), o.kalman_measurement_sigma_px);
     t.uv = p1[i];
+    if (reanchor[i]) {
+      t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
+      t.anchor_linear = cv::Matx22f::eye();
+      ++st.reanchored;
+    }
     ++t.age;
     t.remapped = false;
     kept.push_back(std::move(t));
@@ -594,6 +707,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
     t.remapped = true;
     t.descriptor = req->descriptor;  // the map point keeps the look it was mapped with
+    if (o.anchor_every > 0) t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
     tracks.push_back(std::move(t));
     result->remapped_ids.push_back(req->feature_id);
   }
@@ -612,6 +726,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.uv = candidates[k].uv;
     const auto [vel, sigma] = InitialVelocity(t.uv, n_carried);
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
+    if (o.anchor_every > 0) t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
     to_describe.push_back(tracks.size());
     tracks.push_back(std::move(t));
     ++st.detected;
@@ -662,8 +777,8 @@ FrameResult Frontend::Process(const cv::Mat& image, int64_t index, double stamp_
 
   t0 = Clock::now();
   m.size = gray.size();
-  m.TrackFeatures(pyramid, &result);
-  st.track_ms = MsSince(t0);
+  m.TrackFeatures(gray, pyramid, &result);
+  st.track_ms = MsSince(t0) - st.anchor_ms;
 
   m.DetectAndRemap(gray, remap, &result);
 

@@ -43,6 +43,23 @@ struct FrontendOptions {
                                          // drops a track; <= 0: off
   int track_border_px = 10;              // a track nearer than this to the edge has left the image (half the LK
                                          // window: nearer, the window reads reflected pixels and the track drifts)
+  // ---- anchoring (Shi and Tomasi's feature monitoring) ---------------------------------------------------
+  // Frame-to-frame LK re-templates every frame, so a track slides along its texture (rounded corners seen at
+  // another scale, an outline passing by): on the rendered scene a tenth of a pixel a frame, pixels after
+  // a hundred frames. Every anchor_every frames each track is also aligned, by an affine warp (ECC,
+  // cv::findTransformECC), with the patch it was born with; the aligned centre replaces the LK position,
+  // and a track whose patch no longer matches (occluded, slid onto something else) is dropped.
+  int anchor_every = 1;                  // frames between alignments of a track; 0: off
+  int anchor_patch_px = 21;              // side of the patch kept at birth (odd)
+  double anchor_min_correlation = 0.9;   // ECC correlation below this: a mismatch
+  double anchor_max_shift_px = 2.0;      // alignment moving the track further than this from LK: a mismatch
+  // On a mismatch the track is dropped (a corner on an outline, an occluded point: the rendered scene's
+  // tracks stay within 0.1 px of their scene point), or, with this set, it keeps its LK position and takes a
+  // new patch there (fast forward motion, KITTI at 10 Hz: a tenth of the tracks change look that much in one
+  // frame, and dropping them all starves the initialisation).
+  bool anchor_reanchor_on_mismatch = false;
+  double anchor_max_scale_change = 1.5;  // the warp grew or shrank the patch more (or sheared it as much):
+                                         // a new patch is taken where the track is now
   // ---- Kalman prediction (state u, v, du, dv per track) -----------------------------------------------
   bool use_kalman_prediction = true;   // false: LK starts where the feature was (zero motion)
   double kalman_accel_sigma_px = 2.0;  // change of image velocity per frame (px/frame^2)
@@ -89,6 +106,9 @@ struct FrameStats {
   int lost_forward_backward = 0;  // round trip error above max_forward_backward_px
   int lost_patch_error = 0;       // LK residual above max_patch_error
   int lost_outside = 0;           // left the image
+  int lost_anchor = 0;            // no longer matches the patch it was born with (see anchor_every)
+  int anchored = 0;               // tracks aligned with their birth patch in this frame
+  int reanchored = 0;             // ... of which took a new patch (the view changed too much)
   int detected = 0;               // new tracks born in this frame
   int remap_requests = 0;
   int remapped = 0;
@@ -101,9 +121,10 @@ struct FrameStats {
   // were in the previous frame: how much the prediction saves LK.
   double mean_prediction_error_px = 0;
   double mean_displacement_px = 0;
+  double mean_anchor_shift_px = 0;  // how far the alignment moved the anchored tracks from where LK put them
   // Milliseconds. describe_ms: describing this frame's new tracks when synchronous; with describe_async,
   // the task's own time for the previous frame's tracks, and describe_wait_ms the time Process waited for it.
-  double convert_ms = 0, pyramid_ms = 0, track_ms = 0, detect_ms = 0, remap_ms = 0, describe_ms = 0,
+  double convert_ms = 0, pyramid_ms = 0, track_ms = 0, anchor_ms = 0, detect_ms = 0, remap_ms = 0, describe_ms = 0,
          describe_wait_ms = 0, total_ms = 0;
 };
 

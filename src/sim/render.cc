@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -60,7 +61,7 @@ SceneRenderer::SceneRenderer(const RenderOptions& options) : options_(options) {
   for (int i = 0; i < 7; ++i) textures_[i] = MakeTexture(options_.seed, 100 + i);
 }
 
-float SceneRenderer::Shade(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
+std::optional<SceneRenderer::Hit> SceneRenderer::Trace(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
   // The box (centred at the origin, kPaperBoxSizeM), by the slab method.
   const Eigen::Vector3d h(kPaperBoxSizeM[0] / 2, kPaperBoxSizeM[1] / 2, kPaperBoxSizeM[2] / 2);
   double t_near = -std::numeric_limits<double>::infinity(), t_far = std::numeric_limits<double>::infinity();
@@ -75,24 +76,34 @@ float SceneRenderer::Shade(const Eigen::Vector3d& o, const Eigen::Vector3d& d) c
     if (a > t_near) t_near = a, axis = k;
     t_far = std::min(t_far, b);
   }
-  // Fixed light: faces differ in brightness, so box edges are visible.
-  static const float kFaceLight[6] = {0.75f, 0.9f, 0.8f, 0.95f, 0.6f, 1.0f};
   if (axis >= 0 && t_near <= t_far && t_near > 0) {
     const Eigen::Vector3d p = o + t_near * d;
     const int face = 2 * axis + (d[axis] < 0 ? 1 : 0);  // entering through +face when moving towards -axis
     const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
-    const double u = (p[a1] + h[a1]) / (2 * h[a1]), v = (p[a2] + h[a2]) / (2 * h[a2]);
-    return kFaceLight[face] * (0.15f + 0.85f * Bilinear(textures_[face], u, v));
+    return Hit{p, face, (p[a1] + h[a1]) / (2 * h[a1]), (p[a2] + h[a2]) / (2 * h[a2])};
   }
   // The floor under the box (z = -h.z), a square of floor_half_size_m.
   if (d.z() < -1e-9) {
     const double t = (-h.z() - o.z()) / d.z();
     const Eigen::Vector3d p = o + t * d;
     const double s = options_.floor_half_size_m;
-    if (t > 0 && std::abs(p.x()) < s && std::abs(p.y()) < s)
-      return 0.7f * (0.15f + 0.85f * Bilinear(textures_[6], (p.x() + s) / (2 * s), (p.y() + s) / (2 * s)));
+    if (t > 0 && std::abs(p.x()) < s && std::abs(p.y()) < s) return Hit{p, 6, (p.x() + s) / (2 * s), (p.y() + s) / (2 * s)};
   }
-  return 0.35f;  // background
+  return std::nullopt;
+}
+
+float SceneRenderer::Shade(const Eigen::Vector3d& o, const Eigen::Vector3d& d) const {
+  // Fixed light: faces differ in brightness, so box edges are visible; the floor is darker.
+  static const float kLight[7] = {0.75f, 0.9f, 0.8f, 0.95f, 0.6f, 1.0f, 0.7f};
+  const std::optional<Hit> hit = Trace(o, d);
+  if (!hit) return 0.35f;  // background
+  return kLight[hit->surface] * (0.15f + 0.85f * Bilinear(textures_[hit->surface], hit->u, hit->v));
+}
+
+std::optional<SceneRenderer::Hit> SceneRenderer::SurfacePoint(const PinholeCamera& camera, const Pose& cam_from_world,
+                                                               const Eigen::Vector2d& uv_px) const {
+  const Pose world_from_cam = cam_from_world.Inverse();
+  return Trace(world_from_cam.t, (world_from_cam.R() * camera.Unproject(uv_px)).normalized());
 }
 
 cv::Mat SceneRenderer::Render(const PinholeCamera& camera, const Pose& cam_from_world, uint64_t frame_index) const {

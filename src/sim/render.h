@@ -3,6 +3,7 @@
 // textured floor, ray-cast for each frame's exact pose, so that the whole pipeline, front end included,
 // has an end-to-end test with exact ground truth.
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include <opencv2/core.hpp>
@@ -25,8 +26,18 @@ class SceneRenderer {
   explicit SceneRenderer(const RenderOptions& options);
   // 8-bit grey image of the scene seen by `camera` from cam_from_world; frame_index seeds the noise.
   cv::Mat Render(const PinholeCamera& camera, const Pose& cam_from_world, uint64_t frame_index) const;
+  struct Hit {
+    Eigen::Vector3d point;  // world frame
+    int surface = 0;        // 0-5 the box faces -x, +x, -y, +y, -z, +z; 6 the floor
+    double u = 0, v = 0;    // texture coordinates in [0, 1]
+  };
+  // The scene point seen at pixel uv_px (the pixel grid of Render: centres at integers), or nullopt where the
+  // ray meets only the background: the exact truth for a feature found in a rendered image.
+  std::optional<Hit> SurfacePoint(const PinholeCamera& camera, const Pose& cam_from_world,
+                                  const Eigen::Vector2d& uv_px) const;
 
  private:
+  std::optional<Hit> Trace(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir) const;
   float Shade(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir) const;
   RenderOptions options_;
   cv::Mat textures_[7];  // CV_32F in [0, 1]: faces -x, +x, -y, +y, -z, +z, then the floor

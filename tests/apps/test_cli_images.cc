@@ -349,11 +349,13 @@ RealRun RunOnRealSequence(const std::string& seq, const TempDir& dir, const std:
 TEST(CliImagesReal, Kitti06AllFramesTracked) {
   REAL_SEQUENCE_OR_SKIP(seq, "kitti_odometry_06_frames000-050");
   TempDir dir;
-  const RealRun run = RunOnRealSequence(seq, dir, "--hypotheses 65536");
+  // --anchor-mismatch reanchor: at 10 Hz forward a tenth of the tracks no longer match their birth patch one
+  // frame later; dropping them (the default) starves the initialisation (measured: frames 0-8 without a pose).
+  const RealRun run = RunOnRealSequence(seq, dir, "--hypotheses 65536 --anchor-mismatch reanchor");
   if (run.report.is_null()) return;
   EXPECT_EQ(run.report["tracked"], 51) << run.output;  // the target: every frame
-  // The target is 0.10 m. Measured with these flags: 0.055 m (seed 1); 0.048-0.073 m over seeds 1-5
-  // (2^18 hypotheses, seeds 1-3: 0.074-0.115 m; the spread is the estimator's, not the budget's).
+  // The target is 0.10 m. Measured with these flags: 0.045 m (seed 1), 0.035-0.052 m over seeds 1-3
+  // (without the anchoring, --anchor-every 0: 0.048-0.073 m over seeds 1-5).
   EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.10) << run.output;
 }
 
@@ -362,13 +364,14 @@ TEST(CliImagesReal, Kitti06AllFramesTracked) {
 TEST(CliImagesReal, Kitti06PnpPoseAndBundleAdjustment) {
   REAL_SEQUENCE_OR_SKIP(seq, "kitti_odometry_06_frames000-050");
   TempDir dir;
-  const RealRun run = RunOnRealSequence(seq, dir, "--pose pnp --structure ba");
+  const RealRun run = RunOnRealSequence(seq, dir, "--pose pnp --structure ba --anchor-mismatch reanchor");
   if (run.report.is_null()) return;
   EXPECT_EQ(run.report["options"]["pose"], "pnp");
   EXPECT_EQ(run.report["options"]["structure"], "ba");
   EXPECT_EQ(run.report["tracked"], 51) << run.output;
   EXPECT_EQ(run.report["lost"], 0);
-  // Measured 0.052 m, the same for seeds 1-5 (neither step samples, and the initialisation came out the same);
+  // Measured 0.019 m (0.052 m before the tracks were aligned with their birth patch), the same for every seed
+  // (neither step samples, and the initialisation came out the same);
   // the margin is for other CPUs and library versions (OpenCV's RANSAC, Ceres). A bundle adjustment that
   // drifted or a PnP that failed on a few frames costs more than that (the Monte Carlo steps: 0.048-0.073 m).
   EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.07) << run.output;
@@ -410,13 +413,16 @@ TEST(CliImagesReal, SevenScenesRedKitchen) {
   // The colour camera as SOURCE.md recommends (the folder's camera-intrinsics.txt is the depth camera's).
   testing::WriteText(dir / "camera.txt", "525 525 320 240\n");
   const RealRun run =
-      RunOnRealSequence(seq, dir, fmt::format("--camera {} --hypotheses 65536 --min-parallax-deg 8", dir / "camera.txt"));
+      RunOnRealSequence(seq, dir, fmt::format("--camera {} --hypotheses 65536 --min-parallax-deg 8 --anchor-every 0",
+                                              dir / "camera.txt"));
   if (run.report.is_null()) return;
   EXPECT_GE(run.report["tracked"].get<int>(), 290) << run.output;  // the target; measured: 300
   // The target is 0.05 m. Measured with these flags: 0.047 m (seed 1), but 0.042-0.062 m over seeds
   // 1-3: the map's scale drifts on this 10 s hand-held survey (about x1.3 from start to end), so the target is met
   // for some seeds only; the bound is the worst seed measured plus a margin. With the back end's 2 degrees
-  // for new points (no --min-parallax-deg) the drift is about x2 and the ATE 0.12-0.13 m.
+  // for new points (no --min-parallax-deg) the drift is about x2 and the ATE 0.12-0.13 m. The alignment of
+  // each track with its birth patch (on by default) does not help here: 0.055-0.066 m over seeds 1-3, so it is
+  // off (--anchor-every 0): the error is the scale drift, not the tracks'.
   EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.07) << run.output;
 }
 

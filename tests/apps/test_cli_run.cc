@@ -169,6 +169,23 @@ TEST(CliRun, RenderedPaperScenarioEndToEndFromImages) {
   EXPECT_NEAR(scale, 1.0, 0.25) << g.output;
 }
 
+// The target for the rendered paper scenario (`make demo`): the whole 300-frame sequence from its
+// images, mean translation error <= 2 cm and mean rotation error <= 1 degree after Sim(3) alignment.
+TEST(CliRun, RenderedPaperScenarioMeetsThePapersPrecisionFromImages) {
+  TempDir dir;
+  const auto s = RunMcslam("synth --scenario paper --seed 1 --render --out " + dir / "s");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  const auto r = RunMcslam("run " + dir / "s --dataset synthetic --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=300 lost=0"), std::string::npos) << r.output;
+  // Measured 0.84 cm and 0.58 deg (seed 1; seed 3: 0.99 cm, 0.58 deg). Before the tracks were aligned with
+  // their birth patch (--anchor-every 0) 8.2 cm and 3.5 deg: the bounds are the issue's.
+  const double trans = std::stod(r.output.substr(r.output.find("ate_mean=") + 9));
+  const double rot = std::stod(r.output.substr(r.output.find("rot_mean_deg=") + 13));
+  EXPECT_LT(trans, 0.02) << r.output;
+  EXPECT_LT(rot, 1.0) << r.output;
+}
+
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   const auto r = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 3");
   ASSERT_EQ(r.exit_code, 0) << r.output;
