@@ -385,7 +385,7 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--anchor-patch-px", o->frontend.anchor_patch_px, "Front end: side of the patch a track keeps from its birth")
       ->capture_default_str();
   cmd->add_option("--anchor-min-correlation", o->frontend.anchor_min_correlation,
-                  "Front end: a track whose birth patch correlates less than this (ECC) is a mismatch")
+                  "Front end: a track whose birth patch correlates less than this (normalised, affine) is a mismatch")
       ->capture_default_str();
   cmd->add_option_function<std::string>(
          "--anchor-mismatch",

@@ -20,6 +20,7 @@
 #include <utility>
 
 #include "frontend/kalman.h"
+#include "frontend/patch_align.h"
 
 namespace mcslam::frontend {
 namespace {
@@ -111,65 +112,29 @@ struct Track {
   int age = 0;
   bool remapped = false;
   std::optional<Descriptor> descriptor;
-  // The patch the track was born with (CV_32F, anchor_patch_px square, centred on it) and the affine warp
-  // from patch pixels to image pixels found at the last alignment (linear part only; the translation follows
-  // the track).
-  cv::Mat anchor;
+  // The patch the track was born with and the affine warp from patch offsets to image offsets found at the
+  // last alignment (linear part only; the translation follows the track).
+  AffinePatch anchor;
   cv::Matx22f anchor_linear = cv::Matx22f::eye();
 };
 
-// The patch of `gray` centred at uv (sub-pixel), as floats.
-cv::Mat AnchorPatch(const cv::Mat& gray, const cv::Point2f& uv, int side) {
-  cv::Mat patch;
-  cv::getRectSubPix(gray, cv::Size(side, side), uv, patch, CV_32F);
-  return patch;
-}
-
 enum class AnchorOutcome : uint8_t { kKept, kReanchor, kMismatch };
 
-// Aligns a track's birth patch with `gray` around `uv` (where LK put it) by an affine ECC warp. On success
-// writes the aligned centre and the warp's linear part.
-AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const cv::Mat& anchor, const cv::Point2f& uv,
+// Aligns a track's birth patch with `gray` from `uv` (where LK put it). On success writes the aligned centre
+// and the warp's linear part.
+AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, const cv::Point2f& uv,
                               const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
-  const float c = static_cast<float>(anchor.cols - 1) / 2.0f;
-  const cv::Matx22f& L = *linear;
-  // The warped patch's corners around uv, and the region of the image that can hold it after the alignment.
-  float x0 = uv.x, x1 = uv.x, y0 = uv.y, y1 = uv.y;
-  for (const float sx : {-c, c})
-    for (const float sy : {-c, c}) {
-      const cv::Vec2f d = L * cv::Vec2f(sx, sy);
-      x0 = std::min(x0, uv.x + d[0]), x1 = std::max(x1, uv.x + d[0]);
-      y0 = std::min(y0, uv.y + d[1]), y1 = std::max(y1, uv.y + d[1]);
-    }
-  const float margin = static_cast<float>(o.anchor_max_shift_px) + 3.0f;
-  const cv::Rect box(static_cast<int>(std::floor(x0 - margin)), static_cast<int>(std::floor(y0 - margin)),
-                     static_cast<int>(std::ceil(x1 - x0 + 2 * margin)) + 1,
-                     static_cast<int>(std::ceil(y1 - y0 + 2 * margin)) + 1);
+  const AffinePatch::Result r = anchor.Align(gray, uv, *linear, 50, 0.001f);
   // Too near the edge to align: the track keeps its LK position this frame.
-  if ((box & cv::Rect(0, 0, gray.cols, gray.rows)) != box) return AnchorOutcome::kKept;
-  cv::Mat region;
-  gray(box).convertTo(region, CV_32F);
-  // Patch pixel p -> region pixel L (p - c) + uv - box.tl.
-  const cv::Vec2f t = cv::Vec2f(uv.x - static_cast<float>(box.x), uv.y - static_cast<float>(box.y)) - L * cv::Vec2f(c, c);
-  cv::Mat warp = (cv::Mat_<float>(2, 3) << L(0, 0), L(0, 1), t[0], L(1, 0), L(1, 1), t[1]);
-  double rho = 0;
-  try {
-    rho = cv::findTransformECC(anchor, region, warp, cv::MOTION_AFFINE,
-                               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-4),
-                               cv::noArray(), 1);
-  } catch (const cv::Exception&) {
-    return AnchorOutcome::kMismatch;  // ECC diverged: the patch is not there
-  }
-  const cv::Matx22f Ln(warp.at<float>(0, 0), warp.at<float>(0, 1), warp.at<float>(1, 0), warp.at<float>(1, 1));
-  const cv::Vec2f centre = Ln * cv::Vec2f(c, c) + cv::Vec2f(warp.at<float>(0, 2), warp.at<float>(1, 2));
-  const cv::Point2f p(centre[0] + static_cast<float>(box.x), centre[1] + static_cast<float>(box.y));
-  if (!(rho >= o.anchor_min_correlation) || !(cv::norm(p - uv) <= o.anchor_max_shift_px)) return AnchorOutcome::kMismatch;
-  *aligned = p;
-  *linear = Ln;
+  if (!r.inside) return AnchorOutcome::kKept;
+  if (!(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px))
+    return AnchorOutcome::kMismatch;
+  *aligned = r.centre;
+  *linear = r.linear;
   // Singular values of the linear part: how much the patch grew, shrank or was sheared since birth.
   cv::Vec2f w;
   cv::Matx22f u, vt;
-  cv::SVD::compute(Ln, w, u, vt);
+  cv::SVD::compute(r.linear, w, u, vt);
   const double smax = std::max(w[0], w[1]), smin = std::min(w[0], w[1]);
   const double k = o.anchor_max_scale_change;
   return (smax > k || smin < 1.0 / k || smax > k * smin) ? AnchorOutcome::kReanchor : AnchorOutcome::kKept;
@@ -478,7 +443,7 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     t.kf.Update(ToEigen(p1[i]), o.kalman_measurement_sigma_px);
     t.uv = p1[i];
     if (reanchor[i]) {
-      t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
+      t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
       t.anchor_linear = cv::Matx22f::eye();
       ++st.reanchored;
     }
@@ -707,7 +672,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
     t.remapped = true;
     t.descriptor = req->descriptor;  // the map point keeps the look it was mapped with
-    if (o.anchor_every > 0) t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
+    if (o.anchor_every > 0) t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
     tracks.push_back(std::move(t));
     result->remapped_ids.push_back(req->feature_id);
   }
@@ -726,7 +691,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.uv = candidates[k].uv;
     const auto [vel, sigma] = InitialVelocity(t.uv, n_carried);
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
-    if (o.anchor_every > 0) t.anchor = AnchorPatch(gray, t.uv, o.anchor_patch_px);
+    if (o.anchor_every > 0) t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
     to_describe.push_back(tracks.size());
     tracks.push_back(std::move(t));
     ++st.detected;

@@ -46,12 +46,13 @@ struct FrontendOptions {
   // ---- anchoring (Shi and Tomasi's feature monitoring) ---------------------------------------------------
   // Frame-to-frame LK re-templates every frame, so a track slides along its texture (rounded corners seen at
   // another scale, an outline passing by): on the rendered scene a tenth of a pixel a frame, pixels after
-  // a hundred frames. Every anchor_every frames each track is also aligned, by an affine warp (ECC,
-  // cv::findTransformECC), with the patch it was born with; the aligned centre replaces the LK position,
-  // and a track whose patch no longer matches (occluded, slid onto something else) is dropped.
+  // a hundred frames. Every anchor_every frames each track is also aligned, by an affine warp maximising the
+  // normalised correlation (frontend/patch_align.h), with the patch it was born with; the aligned centre
+  // replaces the LK position, and a track whose patch no longer matches (occluded, slid onto something else)
+  // is dropped.
   int anchor_every = 1;                  // frames between alignments of a track; 0: off
   int anchor_patch_px = 21;              // side of the patch kept at birth (odd)
-  double anchor_min_correlation = 0.9;   // ECC correlation below this: a mismatch
+  double anchor_min_correlation = 0.9;   // normalised correlation below this: a mismatch
   double anchor_max_shift_px = 2.0;      // alignment moving the track further than this from LK: a mismatch
   // On a mismatch the track is dropped (a corner on an outline, an occluded point: the rendered scene's
   // tracks stay within 0.1 px of their scene point), or, with this set, it keeps its LK position and takes a

@@ -116,11 +116,11 @@ TEST(FrontendRendered, AnchoredTracksStayOnTheirScenePoint) {
   };
   std::printf("ages 100-199, within 0.5 px: anchored %.3f, frame-to-frame %.3f\n", within(a, 0.5), within(d, 0.5));
   // Measured: anchored median 0.08 px, frame-to-frame 1.67 px; the bounds sit between the two with a margin of
-  // 2x or more on each side. A tenth of the anchored tracks still slide (occluded points whose patch ECC keeps
-  // matching at a correlation above 0.9): the share within 0.5 px is checked, not the tail.
+  // 2x or more on each side. Some anchored tracks still slide (occluded points whose patch keeps matching at a
+  // correlation above 0.9): the share within 0.5 px is checked, not the tail.
   EXPECT_LT(Median(a), 0.2);
   EXPECT_GT(Median(d), 0.6);
-  // Measured: 82 % of the anchored (track, frame) pairs within 0.5 px of the truth, 10 % of the others.
+  // Measured: 86 % of the anchored (track, frame) pairs within 0.5 px of the truth, 10 % of the others.
   EXPECT_GT(within(a, 0.5), 0.6);
   EXPECT_LT(within(d, 0.5), 0.3);
   // Right after birth the two agree (the anchoring cannot make young tracks worse): ages 1-5 median below

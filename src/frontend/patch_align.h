@@ -1,0 +1,46 @@
+#pragma once
+// Affine alignment of a small patch with an image, by inverse-compositional Gauss-Newton (Baker and Matthews)
+// on intensities normalised for gain and bias in every iteration: the feature monitoring of Shi and Tomasi,
+// done per track and per frame, so it must be cheap. The template side (its gradients, steepest-descent
+// images and Hessian) is computed once when the patch is taken; an iteration then samples the image at the
+// patch's pixels and solves a 6x6 system. Same criterion as OpenCV's ECC (zero-mean normalised
+// correlation, affine), at a fraction of its cost per call (no per-call allocation, blur or image gradients).
+#include <array>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+namespace mcslam::frontend {
+
+class AffinePatch {
+ public:
+  AffinePatch() = default;
+  // The side x side patch of 8-bit `gray` centred at `centre` (sub-pixel). empty() when the patch (and the
+  // pixel around it that its gradients need) does not fit in the image, or has no texture at all.
+  AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int side);
+  bool empty() const { return side_ == 0; }
+  int side() const { return side_; }
+
+  struct Result {
+    bool inside = false;      // false: the warped patch left the image; nothing else is set
+    float correlation = 0;    // zero-mean normalised correlation at the final warp, in [-1, 1]
+    cv::Point2f centre;       // where the patch's centre lands in the image
+    cv::Matx22f linear;       // image offset = linear * patch offset (from the patch's centre)
+    int iterations = 0;
+  };
+  // Aligns with `gray` (8-bit) starting from (centre, linear); stops when an update moves the patch's
+  // corners by less than `epsilon_px`, or after `max_iterations`.
+  Result Align(const cv::Mat& gray, const cv::Point2f& centre, const cv::Matx22f& linear, int max_iterations = 30,
+               float epsilon_px = 0.01f) const;
+
+ private:
+  int side_ = 0;
+  float half_ = 0;                              // (side - 1) / 2: patch offsets run from -half to half
+  std::vector<float> values_;                   // template intensities minus their mean
+  float norm_ = 0;                              // their L2 norm
+  std::vector<std::array<float, 6>> descent_;   // steepest-descent images, one 6-vector per pixel
+  Eigen::Matrix<double, 6, 6> hessian_inv_;
+};
+
+}  // namespace mcslam::frontend
