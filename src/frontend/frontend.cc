@@ -118,7 +118,7 @@ struct Track {
   cv::Matx22f anchor_linear = cv::Matx22f::eye();
 };
 
-enum class AnchorOutcome : uint8_t { kKept, kReanchor, kMismatch };
+enum class AnchorOutcome : uint8_t { kNotAligned, kKept, kReanchor, kMismatch };
 
 // Aligns a track's birth patch with `gray` from `uv` (where LK put it). On success writes the aligned centre
 // and the warp's linear part.
@@ -126,8 +126,10 @@ AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, co
                               const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
   const AffinePatch::Result r = anchor.Align(gray, uv, *linear, 50, 0.001f);
   // Too near the edge to align: the track keeps its LK position this frame.
-  if (!r.inside) return AnchorOutcome::kKept;
-  if (!(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px))
+  if (!r.inside) return AnchorOutcome::kNotAligned;
+  // A mirrored warp (negative determinant) is no view of the same surface.
+  if (r.left_image || !(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px) ||
+      !(cv::determinant(r.linear) > 0))
     return AnchorOutcome::kMismatch;
   *aligned = r.centre;
   *linear = r.linear;
@@ -383,17 +385,17 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
 
   // Alignment with the birth patches (each track on its own: in parallel, the result independent of the order).
   const auto t_anchor = Clock::now();
-  std::vector<uint8_t> reanchor(n, 0);
+  std::vector<uint8_t> reanchor(n, 0), aligned_ok(n, 0);
+  std::vector<float> anchor_shift(n, 0.0f);
   if (o.anchor_every > 0) {
     std::vector<size_t> due;
     for (size_t i = 0; i < n; ++i)
       if (outcome[i] == kOk && !tracks[i].anchor.empty() && (tracks[i].age + 1) % o.anchor_every == 0) due.push_back(i);
-    std::vector<cv::Point2f> before(due.size());
-    for (size_t k = 0; k < due.size(); ++k) before[k] = p1[due[k]];
     tbb::parallel_for(size_t{0}, due.size(), [&](size_t k) {
       const size_t i = due[k];
-      cv::Point2f aligned = p1[i];  // unchanged where the patch cannot be aligned (too near the edge)
+      cv::Point2f aligned = p1[i];
       const AnchorOutcome a = AlignWithAnchor(gray, tracks[i].anchor, p1[i], o, &aligned, &tracks[i].anchor_linear);
+      if (a == AnchorOutcome::kNotAligned) return;  // too near the edge: the LK position stands this frame
       if (a == AnchorOutcome::kMismatch) {
         // Either the track goes, or it stays where LK put it and takes a new patch there.
         if (o.anchor_reanchor_on_mismatch)
@@ -403,17 +405,13 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
         return;
       }
       if (a == AnchorOutcome::kReanchor) reanchor[i] = 1;
+      anchor_shift[i] = static_cast<float>(cv::norm(aligned - p1[i]));
+      aligned_ok[i] = 1;
       p1[i] = aligned;
     });
-    double sum_shift = 0;
-    for (size_t k = 0; k < due.size(); ++k) {
-      if (outcome[due[k]] != kOk) continue;
-      ++st.anchored;
-      sum_shift += cv::norm(p1[due[k]] - before[k]);
-    }
-    if (st.anchored > 0) st.mean_anchor_shift_px = sum_shift / st.anchored;
   }
   st.anchor_ms = MsSince(t_anchor);
+  double sum_shift = 0;
 
   std::vector<Track> kept;
   kept.reserve(n);
@@ -442,16 +440,22 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     sum_disp += cv::norm(p1[i] - p0[i]);
     t.kf.Update(ToEigen(p1[i]), o.kalman_measurement_sigma_px);
     t.uv = p1[i];
+    if (aligned_ok[i]) {
+      ++st.anchored;
+      sum_shift += anchor_shift[i];
+    }
     if (reanchor[i]) {
+      // Near the edge the new patch may not fit (empty): the track then goes on unmonitored.
       t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
       t.anchor_linear = cv::Matx22f::eye();
-      ++st.reanchored;
+      st.reanchored += !t.anchor.empty();
     }
     ++t.age;
     t.remapped = false;
     kept.push_back(std::move(t));
   }
   tracks = std::move(kept);
+  if (st.anchored > 0) st.mean_anchor_shift_px = sum_shift / st.anchored;
   st.tracked = static_cast<int>(tracks.size());
   if (!tracks.empty()) {
     st.mean_prediction_error_px = sum_pred / static_cast<double>(tracks.size());

@@ -1,6 +1,7 @@
 #include "frontend/patch_align.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
@@ -71,13 +72,15 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
 
 AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& centre_in, const cv::Matx22f& linear_in,
                                        int max_iterations, float epsilon_px) const {
+  CV_Assert(gray.type() == CV_8UC1);
   Result r;
   if (empty()) return r;
   const int n = side_ * side_;
   const float w1 = static_cast<float>(gray.cols - 1), h1 = static_cast<float>(gray.rows - 1);
   const size_t step = gray.step[0];
   const uint8_t* data = gray.data;
-  std::vector<float> sampled(static_cast<size_t>(n));
+  thread_local std::vector<float> sampled;  // one buffer per thread: no allocation per call once grown
+  sampled.resize(static_cast<size_t>(n));
   cv::Matx22f L = linear_in;
   cv::Point2f c = centre_in;
   for (int it = 0; it <= max_iterations; ++it) {
@@ -85,7 +88,10 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
     for (const float sx : {-half_, half_})
       for (const float sy : {-half_, half_}) {
         const float x = L(0, 0) * sx + L(0, 1) * sy + c.x, y = L(1, 0) * sx + L(1, 1) * sy + c.y;
-        if (!(x >= 0 && y >= 0 && x < w1 && y < h1)) return r;  // r.inside stays false
+        if (!(x >= 0 && y >= 0 && x < w1 && y < h1)) {
+          r.left_image = it > 0;  // started inside, then an update carried the patch out: no alignment
+          return r;
+        }
       }
     double sum = 0;
     for (int py = 0; py < side_; ++py) {
@@ -93,7 +99,8 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
       for (int px = 0; px < side_; ++px) {
         const float dx = static_cast<float>(px) - half_;
         const float x = L(0, 0) * dx + L(0, 1) * dy + c.x, y = L(1, 0) * dx + L(1, 1) * dy + c.y;
-        const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+        // Clamped: the corners bound every sample up to rounding, which must not reach past the last pixel.
+        const int x0 = std::min(static_cast<int>(x), gray.cols - 2), y0 = std::min(static_cast<int>(y), gray.rows - 2);
         const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
         const uint8_t* p = data + static_cast<size_t>(y0) * step + x0;
         const float v = (1 - fy) * ((1 - fx) * p[0] + fx * p[1]) + fy * ((1 - fx) * p[step] + fx * p[step + 1]);

@@ -23,7 +23,9 @@ class AffinePatch {
   int side() const { return side_; }
 
   struct Result {
-    bool inside = false;      // false: the warped patch left the image; nothing else is set
+    bool inside = false;      // false: the patch does not fit in the image at the start; nothing else is set
+    bool left_image = false;  // an update carried it out of the image (a diverging alignment); the other
+                              // fields hold the last iterate inside
     float correlation = 0;    // zero-mean normalised correlation at the final warp, in [-1, 1]
     cv::Point2f centre;       // where the patch's centre lands in the image
     cv::Matx22f linear;       // image offset = linear * patch offset (from the patch's centre)
