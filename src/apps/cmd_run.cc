@@ -280,6 +280,10 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--window", args->system.mapping.window, "Keyframes in the Fibonacci window of the point adjustment")
       ->check(CLI::Range(2, 64))
       ->capture_default_str();
+  cmd->add_option("--history-frames", args->system.mapping.history_frames,
+                  "Frames whose features the back end keeps (older ones keep only their pose; never less than the "
+                  "window reaches back)")
+      ->capture_default_str();
   cmd->add_option("--adjust-px", args->system.mapping.adjust_threshold_px,
                   "Residual (median over the window) above which a point that no sample fixes is an outlier")
       ->check(CLI::PositiveNumber)

@@ -63,6 +63,7 @@ void InitOptions::Check() const {
 }
 
 void MappingOptions::Check() const {
+  if (history_frames < 1) Fail(fmt::format("mapping: history_frames must be >= 1, got {}", history_frames));
   if (retriangulate_after_frames < 1)
     Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
   if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));
@@ -121,6 +122,7 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
                      rec.features.end());
   map_.frames.push_back(std::move(rec));
   const int slot = static_cast<int>(map_.frames.size()) - 1;
+  PruneHistory(slot);
 
   std::vector<FrameReport> out;
   if (!initialised_) {
@@ -568,8 +570,9 @@ int System::TriangulateNewPoints(int slot) {
       continue;
     // Posed keyframes where this feature was seen, oldest first (the track's history).
     std::vector<int> seen;
-    for (int k : map_.keyframes)
-      if (map_.frames[k].has_pose && map_.frames[k].Find(f.id)) seen.push_back(k);
+    for (auto it = std::lower_bound(map_.keyframes.begin(), map_.keyframes.end(), pruned_until_);
+         it != map_.keyframes.end(); ++it)
+      if (map_.frames[*it].has_pose && map_.frames[*it].Find(f.id)) seen.push_back(*it);
     if (static_cast<int>(seen.size()) < mo.min_track_frames) continue;
     // Robust linear triangulation: a point from each of a few view pairs (first-current, and pairs that
     // skip the first or the current view in case a wrong match sits there), the views that agree with it
@@ -616,6 +619,19 @@ int System::TriangulateNewPoints(int slot) {
     ++added;
   }
   return added;
+}
+
+void System::PruneHistory(int slot) {
+  int keep_from = slot - options_.mapping.history_frames;
+  // The oldest keyframe the Fibonacci window can still reach.
+  const long reach = FibonacciReach(options_.mapping.window);
+  const long nkf = static_cast<long>(map_.keyframes.size());
+  if (nkf > 0) keep_from = std::min(keep_from, map_.keyframes[static_cast<size_t>(std::max(0L, nkf - 1 - reach))]);
+  // The initialisation and the settling work on every frame since the reference.
+  if ((!initialised_ || settling_) && reference_slot_ >= 0) keep_from = std::min(keep_from, reference_slot_);
+  for (; pruned_until_ < keep_from; ++pruned_until_) {
+    std::vector<FeatureUndistorted>().swap(map_.frames[static_cast<size_t>(pruned_until_)].features);
+  }
 }
 
 std::vector<int> System::WindowSlots() const {

@@ -62,6 +62,10 @@ struct MappingOptions {
   // A point removed as an outlier may be triangulated again from its track this many frames later (its
   // first triangulation is often what was wrong: low parallax early in the track).
   int retriangulate_after_frames = 10;
+  // Frames whose features are kept (their poses are always kept): older ones drop theirs, so that memory and
+  // the triangulation's search through the track history stay bounded on a run of any length. Never less
+  // than the Fibonacci window reaches back, nor the frames since the reference while initialising/settling.
+  int history_frames = 1000;
   // Monte Carlo point adjustment (Algorithm 2).
   bool adjust = true;
   double adjust_threshold_px = 2.5;          // a point whose residual stays above this is an outlier (Algorithm 2)
@@ -168,6 +172,7 @@ class System {
   // feature: the flags gate the next frame's score (§5.2).
   void RefreshInlierFlags(int slot);  // a tracked frame's report: its pose and residual statistics
   void MarkSeen(int slot);
+  void PruneHistory(int slot);
 
   PinholeCamera camera_;
   PinholeCamera ideal_;  // same intrinsics, no distortion: observations are undistorted on arrival
@@ -188,6 +193,7 @@ class System {
   bool settling_ = false;
   double next_settle_parallax_deg_ = 0;
   int init_slot_ = -1;             // the frame the initialisation ended on
+  int pruned_until_ = 0;           // frames before this slot have dropped their features (history_frames)
   double init_baseline_ = 1.0;     // its distance from the reference camera: the scale, kept by every settling
 };
 

@@ -1,6 +1,8 @@
 // The full back end (paper §6) on the synthetic scenario: initialisation, tracking, mapping.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include "apps/slam_job.h"
 #include "core/random.h"
 #include "eval/trajectory_eval.h"
@@ -195,6 +197,41 @@ TEST(System, BaselinesRunEndToEndAndAreExactOnCleanData) {
   }
   EXPECT_THROW(ParsePoseMethod("icp"), std::invalid_argument);
   EXPECT_THROW(ParseStructureMethod("lm"), std::invalid_argument);
+}
+
+// A long run must not keep every frame's features: beyond history_frames (and the window's reach) a frame
+// keeps only its pose. Here a short history (20 frames, window 6: reach 8) over 150 clean frames: the old
+// frames are emptied, the recent ones not, and the trajectory is as good as with the whole history.
+TEST(System, HistoryIsBoundedAndTrackingDoesNotNeedMore) {
+  const apps::SequenceInput in = Scenario(150, 0.0, 0.0);
+  auto run = [&](int history) {
+    SystemOptions o = FastOptions();
+    o.mapping.window = 6;
+    o.mapping.history_frames = history;
+    System system(in.camera, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+    std::vector<FrameReport> reports(in.frames.size());
+    for (const FrameObservations& f : in.frames)
+      for (const FrameReport& r : system.Process(f)) reports[static_cast<size_t>(r.index)] = r;
+    int emptied = 0;
+    for (const FrameRecord& f : system.map().frames) emptied += f.features.empty();
+    // The last `history` frames keep their features (each has ~190 here).
+    for (size_t k = system.map().frames.size() - static_cast<size_t>(std::min(history, 150)); k < 150; ++k)
+      EXPECT_FALSE(system.map().frames[k].features.empty()) << k;
+    io::Trajectory est;
+    for (const FrameReport& r : reports)
+      if (r.has_pose) est.stamps_s.push_back(r.stamp_s), est.world_from_cam.push_back(r.cam_from_world.Inverse());
+    return std::pair{emptied, eval::EvaluateTrajectory(in.groundtruth, est)};
+  };
+  const auto [emptied_short, err_short] = run(20);
+  const auto [emptied_all, err_all] = run(1000);
+  std::printf("history 20: %d frames emptied, ATE mean %.4f m; whole history: %.4f m\n", emptied_short, err_short.ate_m.mean, err_all.ate_m.mean);
+  EXPECT_EQ(emptied_all, 0);
+  // Frames 0-128 dropped theirs (150 - 20 - 1 = 129; the initialisation's reference is among them: it ends early).
+  EXPECT_GE(emptied_short, 120);
+  EXPECT_EQ(err_short.matched(), 150u);
+  // Clean data: both measured 0.9 mm; the short history may differ by the Monte Carlo noise only.
+  EXPECT_LT(err_short.ate_m.mean, 0.005);
+  EXPECT_LT(err_short.ate_m.mean, 2.0 * err_all.ate_m.mean + 0.001);
 }
 
 TEST(SystemOptions, CheckNamesTheField) {
