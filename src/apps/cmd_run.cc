@@ -280,6 +280,11 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--window", args->system.mapping.window, "Keyframes in the Fibonacci window of the point adjustment")
       ->check(CLI::Range(2, 64))
       ->capture_default_str();
+  cmd->add_option("--starving-inliers", args->system.mapping.starving_inliers,
+                  "Keyframes with fewer pose inliers than this take new points from 2 degrees of parallax whatever "
+                  "--min-parallax-deg says, so that the map does not run dry (0: off)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_option("--history-frames", args->system.mapping.history_frames,
                   "Frames whose features the back end keeps (older ones keep only their pose; never less than the "
                   "window reaches back)")

@@ -68,6 +68,9 @@ void MappingOptions::Check() const {
     Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
   if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));
   if (!(min_parallax_deg >= 0)) Fail(fmt::format("mapping: min_parallax_deg must be >= 0, got {}", min_parallax_deg));
+  if (starving_inliers < 0) Fail(fmt::format("mapping: starving_inliers must be >= 0, got {}", starving_inliers));
+  if (!(starving_parallax_deg >= 0))
+    Fail(fmt::format("mapping: starving_parallax_deg must be >= 0, got {}", starving_parallax_deg));
   if (!(max_reprojection_px > 0)) Fail(fmt::format("mapping: max_reprojection_px must be > 0, got {}", max_reprojection_px));
   if (!(adjust_threshold_px > 0)) Fail(fmt::format("mapping: adjust_threshold_px must be > 0, got {}", adjust_threshold_px));
   if (!(candidate_threshold_px >= 0))
@@ -525,7 +528,7 @@ FrameReport System::TrackFrame(int slot) {
     map_.keyframes.push_back(slot);
     r.keyframe = true;
     const auto t1 = std::chrono::steady_clock::now();
-    r.new_points = TriangulateNewPoints(slot);
+    r.new_points = TriangulateNewPoints(slot, est.inliers);
     r.map_ms = Ms(t1);
     if (options_.mapping.adjust) {
       const auto t2 = std::chrono::steady_clock::now();
@@ -555,13 +558,14 @@ void System::MarkSeen(int slot) {
     if (p.state == PointState::kActive && p.last_seen_frame < fr.index) p.state = PointState::kLost;
 }
 
-int System::TriangulateNewPoints(int slot) {
+int System::TriangulateNewPoints(int slot, int inliers) {
   const MappingOptions& mo = options_.mapping;
   const FrameRecord& cur = map_.frames[slot];
   geometry::TriangulationOptions to;
   to.max_reprojection_px = mo.max_reprojection_px;
   to.focal_px = focal_px_;
-  to.min_parallax_deg = mo.min_parallax_deg;
+  to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(mo.min_parallax_deg, mo.starving_parallax_deg)
+                                                      : mo.min_parallax_deg;
   int added = 0;
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* existing = map_.Find(f.id);

@@ -58,6 +58,11 @@ struct MappingOptions {
   // New points (linear triangulation between posed frames).
   int min_track_frames = 3;                  // posed frames a feature must be seen in
   double min_parallax_deg = 2.0;
+  // A map running dry: when fewer inliers than this support a keyframe's pose, its new points need only
+  // starving_parallax_deg (if lower): points from less parallax are less accurate, but a pose with none to
+  // score is lost, and a larger min_parallax_deg with tracks that end early can starve the map.
+  int starving_inliers = 30;
+  double starving_parallax_deg = 2.0;
   double max_reprojection_px = 3.0;
   // A point removed as an outlier may be triangulated again from its track this many frames later (its
   // first triangulation is often what was wrong: low parallax early in the track).
@@ -160,7 +165,7 @@ class System {
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   void Settle(int slot, std::vector<FrameReport>* out);
   FrameReport TrackFrame(int slot);
-  int TriangulateNewPoints(int slot);
+  int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
   PoseEstimate EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
