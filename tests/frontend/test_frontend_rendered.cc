@@ -103,7 +103,7 @@ TEST(FrontendRendered, AnchoredTracksStayOnTheirScenePoint) {
   ASSERT_GT(a.size(), 500u);  // measured ~1900 (track, frame) pairs: the anchoring keeps most tracks alive
   ASSERT_GT(d.size(), 500u);
   // Dropping the tracks that no longer match their birth patch must not leave only the easy ones: the anchored
-  // run keeps most of the (track, frame) pairs the plain one has at these ages (measured 71 %).
+  // run keeps most of the (track, frame) pairs the plain one has at these ages (measured 73 %).
   EXPECT_GT(static_cast<double>(a.size()), 0.5 * static_cast<double>(d.size()));
   auto within = [](const std::vector<double>& e, double px) {
     return static_cast<double>(std::lower_bound(e.begin(), e.end(), px) - e.begin()) / static_cast<double>(e.size());
