@@ -142,6 +142,14 @@ AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, co
   return (smax > k || smin < 1.0 / k || smax > k * smin) ? AnchorOutcome::kReanchor : AnchorOutcome::kKept;
 }
 
+// The patch a track is monitored with from here on; empty (unmonitored) when it does not fit in the image or
+// holds no more than an edge.
+AffinePatch MonitorPatch(const cv::Mat& gray, const cv::Point2f& uv, const FrontendOptions& o) {
+  AffinePatch patch(gray, uv, o.anchor_patch_px);
+  if (!patch.empty() && patch.texture_ratio() < o.anchor_min_texture_ratio) return {};
+  return patch;
+}
+
 struct Candidate {
   cv::Point2f uv;
   float response = 0;
@@ -192,6 +200,8 @@ void FrontendOptions::Check() const {
     fail(fmt::format("anchor_max_shift_px must be positive (got {})", anchor_max_shift_px));
   if (!(anchor_max_scale_change > 1) || !std::isfinite(anchor_max_scale_change))
     fail(fmt::format("anchor_max_scale_change must be > 1 (got {})", anchor_max_scale_change));
+  if (!(anchor_min_texture_ratio >= 0 && anchor_min_texture_ratio < 1))
+    fail(fmt::format("anchor_min_texture_ratio must be in [0, 1) (got {})", anchor_min_texture_ratio));
   if (track_border_px < 0) fail(fmt::format("track_border_px must be >= 0 (got {})", track_border_px));
   if (!(kalman_accel_sigma_px > 0) || !std::isfinite(kalman_accel_sigma_px))
     fail(fmt::format("kalman_accel_sigma_px must be positive (got {})", kalman_accel_sigma_px));
@@ -445,8 +455,9 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       sum_shift += anchor_shift[i];
     }
     if (reanchor[i]) {
-      // Near the edge the new patch may not fit (empty): the track then goes on unmonitored.
-      t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
+      // Near the image's edge the new patch may not fit, or it may hold only an edge (empty): the track then
+      // goes on unmonitored.
+      t.anchor = MonitorPatch(gray, t.uv, o);
       t.anchor_linear = cv::Matx22f::eye();
       st.reanchored += !t.anchor.empty();
     }
@@ -676,7 +687,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
     t.remapped = true;
     t.descriptor = req->descriptor;  // the map point keeps the look it was mapped with
-    if (o.anchor_every > 0) t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
+    if (o.anchor_every > 0) t.anchor = MonitorPatch(gray, t.uv, o);
     tracks.push_back(std::move(t));
     result->remapped_ids.push_back(req->feature_id);
   }
@@ -695,7 +706,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     t.uv = candidates[k].uv;
     const auto [vel, sigma] = InitialVelocity(t.uv, n_carried);
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
-    if (o.anchor_every > 0) t.anchor = AffinePatch(gray, t.uv, o.anchor_patch_px);
+    if (o.anchor_every > 0) t.anchor = MonitorPatch(gray, t.uv, o);
     to_describe.push_back(tracks.size());
     tracks.push_back(std::move(t));
     ++st.detected;

@@ -61,6 +61,11 @@ struct FrontendOptions {
   bool anchor_reanchor_on_mismatch = false;
   double anchor_max_scale_change = 1.5;  // the warp grew or shrank the patch more (or sheared it as much):
                                          // a new patch is taken where the track is now
+  // A patch whose structure tensor is this far from isotropic (smallest over largest eigenvalue) holds little
+  // more than an edge: its alignment can slide along the edge and still correlate well, so such a track (at
+  // birth or when it takes a new patch) goes on unmonitored. Birth patches at Shi-Tomasi corners measure
+  // 0.04 at their 1st percentile and 0.4 at the median (KITTI 06).
+  double anchor_min_texture_ratio = 0.02;
   // ---- Kalman prediction (state u, v, du, dv per track) -----------------------------------------------
   bool use_kalman_prediction = true;   // false: LK starts where the feature was (zero motion)
   double kalman_accel_sigma_px = 2.0;  // change of image velocity per frame (px/frame^2)

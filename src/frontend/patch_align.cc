@@ -27,7 +27,7 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
       sum += v;
     }
   const float mean = static_cast<float>(sum / n);
-  double norm2 = 0;
+  double norm2 = 0, sxx = 0, sxy = 0, syy = 0;
   for (int y = 0; y < side; ++y)
     for (int x = 0; x < side; ++x) {
       float& v = values[static_cast<size_t>(y * side + x)];
@@ -35,6 +35,7 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
       norm2 += static_cast<double>(v) * v;
       const float gx = 0.5f * (rim.at<float>(y + 1, x + 2) - rim.at<float>(y + 1, x));
       const float gy = 0.5f * (rim.at<float>(y + 2, x + 1) - rim.at<float>(y, x + 1));
+      sxx += static_cast<double>(gx) * gx, sxy += static_cast<double>(gx) * gy, syy += static_cast<double>(gy) * gy;
       const float dx = static_cast<float>(x) - h, dy = static_cast<float>(y) - h;
       // d(image position)/d(p) at p = 0 for p = (a11, a12, a21, a22, tx, ty), times the gradient.
       descent[static_cast<size_t>(y * side + x)] = {gx * dx, gx * dy, gy * dx, gy * dy, gx, gy};
@@ -62,6 +63,10 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
   if (!(norm2 > 1e-6)) return;  // a flat patch: nothing to align
   Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
   if (!lu.isInvertible()) return;
+  // Eigenvalues of [[sxx, sxy], [sxy, syy]].
+  const double half_trace = 0.5 * (sxx + syy), root = std::sqrt(0.25 * (sxx - syy) * (sxx - syy) + sxy * sxy);
+  const double l_max = half_trace + root, l_min = std::max(0.0, half_trace - root);
+  texture_ratio_ = l_max > 0 ? static_cast<float>(l_min / l_max) : 0.0f;
   side_ = side;
   half_ = h;
   values_ = std::move(values);

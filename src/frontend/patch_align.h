@@ -20,6 +20,9 @@ class AffinePatch {
   // pixel around it that its gradients need) does not fit in the image, or has no texture at all.
   AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int side);
   bool empty() const { return side_ == 0; }
+  // Smallest over largest eigenvalue of the patch's structure tensor (its summed outer products of
+  // gradients): near 0 for a patch that only holds an edge, whose alignment can slide along it; 0 when empty.
+  float texture_ratio() const { return texture_ratio_; }
   int side() const { return side_; }
 
   struct Result {
@@ -41,6 +44,7 @@ class AffinePatch {
   float half_ = 0;                              // (side - 1) / 2: patch offsets run from -half to half
   std::vector<float> values_;                   // template intensities minus their mean
   float norm_ = 0;                              // their L2 norm
+  float texture_ratio_ = 0;
   std::vector<std::array<float, 6>> descent_;   // steepest-descent images, one 6-vector per pixel
   Eigen::Matrix<double, 6, 6> hessian_inv_;
 };

@@ -104,5 +104,34 @@ TEST(AffinePatch, AnotherPlaceCorrelatesPoorlyAndTheEdgeIsReported) {
   EXPECT_TRUE(AffinePatch(cv::Mat(100, 100, CV_8U, cv::Scalar(77)), cv::Point2f(50.0f, 50.0f), 21).empty());
 }
 
+// The measure behind FrontendOptions::anchor_min_texture_ratio: a patch that holds only an edge has a
+// (nearly) rank-one structure tensor, and nothing in it fixes the alignment along the edge but the image
+// noise; patches of a textured surface are far from that.
+TEST(AffinePatch, AnEdgeOnlyPatchIsMeasuredAsSuch) {
+  // A straight soft edge at 30 degrees through (160, 120).
+  const float c = std::cos(0.5236f), s = std::sin(0.5236f);
+  cv::Mat edge(240, 320, CV_8U);
+  for (int y = 0; y < edge.rows; ++y)
+    for (int x = 0; x < edge.cols; ++x)
+      edge.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(
+          128.0f + 60.0f * std::tanh(((static_cast<float>(x) - 160.0f) * c + (static_cast<float>(y) - 120.0f) * s) / 2.0f));
+  const cv::Point2f at(160.0f, 120.0f);
+  const AffinePatch patch(edge, at, 21);
+  ASSERT_FALSE(patch.empty());  // it is no flat patch: the Hessian is invertible, the gate has to catch it
+  // Tolerance: a straight edge has a rank-one structure tensor; the 8-bit rounding leaves a little in the
+  // other direction, an order of magnitude under the front end's 0.02.
+  EXPECT_LT(patch.texture_ratio(), 0.002f);
+  // An empty patch measures 0.
+  EXPECT_EQ(AffinePatch().texture_ratio(), 0.0f);
+  // Patches of the blob texture (corners and blobs everywhere) are far from edge-only.
+  const BlobTexture tex(3);
+  const cv::Mat img = Image(tex, at, at, cv::Matx22f::eye(), 1.0f, 0.0f);
+  for (const cv::Point2f p : {cv::Point2f(100, 80), cv::Point2f(160, 120), cv::Point2f(220, 160)}) {
+    const AffinePatch blob(img, p, 21);
+    ASSERT_FALSE(blob.empty());
+    EXPECT_GT(blob.texture_ratio(), 0.1f) << p;
+  }
+}
+
 }  // namespace
 }  // namespace mcslam::frontend
