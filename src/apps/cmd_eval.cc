@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <exception>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <fmt/format.h>
@@ -22,6 +23,7 @@ struct EvalArgs {
   double max_dt_s = eval::AssociationOptions{}.max_dt_s;
   std::string gt_format = "auto", est_format = "auto";
   std::string gt_times, est_times;
+  int segments = 0;
 };
 
 // A flag check whose message says what is wrong in words: "--max-dt: must be at least 0 (got -1)".
@@ -63,8 +65,25 @@ void RunEval(const EvalArgs& a) {
                  "mcslam eval: warning: the camera positions lie on a line; the alignment's rotation about it is "
                  "not determined, so rotation errors are not meaningful (ATE is)\n");
   if (!a.csv_path.empty()) eval::WriteFrameErrorsCsv(a.csv_path, errors);
-  // stdout carries exactly the summary line, so scripts can parse it.
+  // Checked before anything is printed: a bad --segments is an error, not half an answer.
+  std::optional<eval::ScaleDrift> drift;
+  if (a.segments > 0) drift = eval::EvaluateScaleDrift(errors, a.segments);
+  // stdout carries the summary line (then, with --segments, one line per segment), so scripts can parse it.
   std::fputs((eval::FormatSummary(errors) + "\n").c_str(), stdout);
+  if (drift) {
+    std::fputs(fmt::format("segments={} scale_max_over_min={:.6g}\n", drift->segments.size(), drift->max_over_min_scale)
+                   .c_str(),
+               stdout);
+    for (size_t k = 0; k < drift->segments.size(); ++k) {
+      const eval::SegmentErrors& g = drift->segments[k];
+      std::fputs(fmt::format("segment={} poses={}-{} stamps={:.6g}-{:.6g} scale={:.6g} scale_vs_whole={:.6g} "
+                             "ate_rmse={:.6g}\n",
+                             k, g.first, g.first + g.count - 1, g.first_stamp_s, g.last_stamp_s, g.scale,
+                             g.scale_vs_whole, g.ate_m.rmse)
+                     .c_str(),
+                 stdout);
+    }
+  }
   std::fflush(stdout);
 }
 
@@ -90,6 +109,10 @@ void RegisterEval(CLI::App& app) {
   cmd->add_option("--est-format", args->est_format, "Estimate file format")->check(formats)->capture_default_str();
   cmd->add_option("--gt-times", args->gt_times, "Times file (one stamp a line) for a KITTI ground truth");
   cmd->add_option("--est-times", args->est_times, "Times file (one stamp a line) for a KITTI estimate");
+  cmd->add_option("--segments", args->segments,
+                  "Also align this many consecutive runs of poses on their own (Sim(3)) and print their scale and "
+                  "ATE: a monocular estimate's scale drift (0: off)")
+      ->check(NumberAtLeast(0));
   cmd->callback([args] { RunEval(*args); });
 }
 

@@ -277,6 +277,44 @@ TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajecto
   return out;
 }
 
+ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments) {
+  const size_t n = errors.matched();
+  if (segments < 1) throw std::invalid_argument(fmt::format("segments must be at least 1 (got {})", segments));
+  if (n < 3 * static_cast<size_t>(segments))
+    throw std::invalid_argument(fmt::format("{} segments need at least {} matched poses, 3 each (got {})", segments,
+                                            3 * segments, n));
+  // The positions as aligned for the whole run: a segment's alignment of those onto the ground truth has
+  // the scale relative to the whole run's.
+  const double whole = errors.alignment_result.gt_world_from_est_world.scale;
+  ScaleDrift out;
+  double lo = std::numeric_limits<double>::infinity(), hi = 0;
+  for (int k = 0; k < segments; ++k) {
+    const size_t first = n * static_cast<size_t>(k) / static_cast<size_t>(segments);
+    const size_t end = n * static_cast<size_t>(k + 1) / static_cast<size_t>(segments);
+    std::vector<Eigen::Vector3d> est, gt;
+    for (size_t i = first; i < end; ++i) {
+      est.push_back(errors.frames[i].est_position_aligned);
+      gt.push_back(errors.frames[i].gt_position);
+    }
+    const Similarity3 a = AlignPositions(est, gt, Alignment::kSim3).gt_world_from_est_world;
+    SegmentErrors seg;
+    seg.first = first;
+    seg.count = end - first;
+    seg.first_stamp_s = errors.frames[first].stamp_s;
+    seg.last_stamp_s = errors.frames[end - 1].stamp_s;
+    seg.scale_vs_whole = a.scale;
+    seg.scale = whole * a.scale;
+    std::vector<double> e;
+    for (size_t i = 0; i < est.size(); ++i) e.push_back((a * est[i] - gt[i]).norm());
+    seg.ate_m = ComputeStats(std::move(e));
+    lo = std::min(lo, seg.scale);
+    hi = std::max(hi, seg.scale);
+    out.segments.push_back(seg);
+  }
+  out.max_over_min_scale = hi / lo;
+  return out;
+}
+
 void WriteFrameErrorsCsv(const std::string& path, const TrajectoryErrors& errors) {
   std::ofstream out(path, std::ios::out | std::ios::trunc);
   if (!out) throw std::runtime_error(fmt::format("{}: cannot open file for writing", path));

@@ -122,6 +122,27 @@ struct TrajectoryErrors {
 TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajectory& est,
                                     const EvalOptions& options = {});
 
+// ---- scale drift ---------------------------------------------------------------------------------------
+
+// A run of consecutive matched poses aligned on its own (Sim(3)). A monocular estimate's scale drifts; one
+// alignment for the whole run hides where, and the ATE then mostly measures the drift. Segment scales that
+// change along the trajectory show it directly, and a segment's own ATE what is left (local consistency).
+struct SegmentErrors {
+  size_t first = 0, count = 0;           // matched poses first .. first + count - 1 (association order)
+  double first_stamp_s = 0, last_stamp_s = 0;
+  double scale = 1;                      // ground-truth metres per estimate unit in this segment
+  double scale_vs_whole = 1;             // scale / the whole run's (Sim(3)) scale
+  ErrorStats ate_m;                      // position error after the segment's own alignment
+};
+struct ScaleDrift {
+  std::vector<SegmentErrors> segments;
+  double max_over_min_scale = 1;  // largest segment scale over the smallest: 1 for no drift
+};
+// Splits the matched poses of `errors` into `segments` consecutive runs of (nearly) equal length and aligns
+// each on its own with Sim(3). Throws std::invalid_argument when segments < 1 or a segment would hold fewer
+// than 3 poses, std::runtime_error when a segment cannot be aligned (all its positions equal).
+ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments);
+
 // CSV, one row per matched pose:
 // stamp,gt_x,gt_y,gt_z,est_x,est_y,est_z,trans_err_m,rot_err_deg (est_* aligned into the ground-truth world).
 // Throws std::runtime_error naming the file when it cannot be written.

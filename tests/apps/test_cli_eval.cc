@@ -78,6 +78,32 @@ TEST(CliEval, NoAlignmentOnMovedCopyIsLarge) {
   EXPECT_EQ(Field(r.output, "rpe_delta"), 3) << r.output;
 }
 
+TEST(CliEval, SegmentsShowAScaleDrift) {
+  TempDir dir;
+  const io::Trajectory gt = MakeGroundTruth();
+  io::Trajectory est = MoveBySim3(gt);
+  // The second half drifts to 1.25 times the first half's size (about the Sim(3)'s translation point).
+  const Eigen::Vector3d t(10.0, -3.0, 7.5);
+  for (size_t i = 50; i < est.world_from_cam.size(); ++i)
+    est.world_from_cam[i].t = t + 1.25 * (est.world_from_cam[i].t - t);
+  io::WriteTum(dir / "gt.txt", gt);
+  io::WriteTum(dir / "est.txt", est);
+  const auto r = RunMcslam("eval " + (dir / "gt.txt") + " " + (dir / "est.txt") + " --segments 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // The summary first (its scale is the whole run's), then the drift and one line per segment.
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 4) << r.output;
+  EXPECT_EQ(Field(r.output, "segments"), 2) << r.output;
+  // 6 significant digits printed.
+  EXPECT_NEAR(Field(r.output, "scale_max_over_min"), 1.25, 1e-5) << r.output;
+  EXPECT_NE(r.output.find("segment=1 poses=50-99"), std::string::npos) << r.output;
+  EXPECT_GT(Field(r.output, "ate_rmse"), 0.01) << r.output;  // the whole run's, hiding the drift
+  // Too many segments for 100 poses: an error, and nothing printed as if it had worked.
+  const auto bad = RunMcslam("eval " + (dir / "gt.txt") + " " + (dir / "est.txt") + " --segments 40");
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("40 segments need at least 120"), std::string::npos) << bad.output;
+  EXPECT_EQ(bad.output.find("matched="), std::string::npos) << bad.output;
+}
+
 TEST(CliEval, MixedFormatsAndKittiTimes) {
   TempDir dir;
   const io::Trajectory gt = MakeGroundTruth();
@@ -116,6 +142,7 @@ TEST(CliEval, BadFlagsNameTheFlag) {
            {"--delta 0", "--delta"},
            {"--max-dt -1", "--max-dt"},
            {"--gt-format xyz", "--gt-format"},
+           {"--segments -1", "--segments"},
        }) {
     const auto r = RunMcslam("eval" + files + " " + flags);
     EXPECT_NE(r.exit_code, 0) << flags;

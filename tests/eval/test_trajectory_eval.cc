@@ -193,6 +193,52 @@ TEST(Eval, Sim3AlignedEstimateHasNoError) {
   EXPECT_GT(EvaluateTrajectory(gt, est, se3).ate_m.rmse, 0.1);
 }
 
+// An estimate whose scale jumps half-way (what a monocular run's drift does, in one step): one alignment
+// for the whole run hides it in a large ATE; two segments recover each half's scale exactly.
+TEST(ScaleDrift, SegmentScalesFollowADriftingEstimate) {
+  const Trajectory gt = MakeGroundTruth(120);
+  Similarity3 second = KnownSim3();
+  second.scale = 2.0;
+  const Trajectory first_half = EstimateFrom(gt, KnownSim3()), second_half = EstimateFrom(gt, second);
+  Trajectory est = first_half;
+  for (size_t i = 60; i < 120; ++i) est.world_from_cam[i] = second_half.world_from_cam[i];
+  const TrajectoryErrors e = EvaluateTrajectory(gt, est);
+  EXPECT_GT(e.ate_m.rmse, 0.1);  // a 25 % scale change on a path ~6 m across
+  const ScaleDrift d = EvaluateScaleDrift(e, 2);
+  ASSERT_EQ(d.segments.size(), 2u);
+  // Exact data: rounding only (positions of order 10 m; 1e-9 as in Sim3AlignedEstimateHasNoError).
+  EXPECT_NEAR(d.segments[0].scale, 2.5, 1e-9);
+  EXPECT_NEAR(d.segments[1].scale, 2.0, 1e-9);
+  EXPECT_NEAR(d.segments[0].scale_vs_whole * e.alignment_result.gt_world_from_est_world.scale, 2.5, 1e-9);
+  EXPECT_NEAR(d.max_over_min_scale, 1.25, 1e-9);
+  EXPECT_LT(d.segments[0].ate_m.max, 1e-9);
+  EXPECT_LT(d.segments[1].ate_m.max, 1e-9);
+  EXPECT_EQ(d.segments[0].first, 0u);
+  EXPECT_EQ(d.segments[1].first, 60u);
+  EXPECT_EQ(d.segments[1].count, 60u);
+  EXPECT_DOUBLE_EQ(d.segments[1].first_stamp_s, gt.stamps_s[60]);
+  EXPECT_DOUBLE_EQ(d.segments[1].last_stamp_s, gt.stamps_s[119]);
+  // Three segments: the middle one holds both scales and cannot be aligned exactly.
+  const ScaleDrift d3 = EvaluateScaleDrift(e, 3);
+  ASSERT_EQ(d3.segments.size(), 3u);
+  EXPECT_GT(d3.segments[1].ate_m.rmse, 0.01);
+  EXPECT_LT(d3.segments[0].ate_m.max, 1e-9);
+  EXPECT_LT(d3.segments[2].ate_m.max, 1e-9);
+  // No drift: every segment has the whole run's scale.
+  const ScaleDrift none = EvaluateScaleDrift(EvaluateTrajectory(gt, first_half), 4);
+  EXPECT_NEAR(none.max_over_min_scale, 1.0, 1e-9);
+}
+
+TEST(ScaleDrift, TooManySegmentsOrNoneThrow) {
+  const Trajectory gt = MakeGroundTruth(120);
+  const TrajectoryErrors e = EvaluateTrajectory(gt, EstimateFrom(gt, KnownSim3()));
+  EXPECT_THROW(EvaluateScaleDrift(e, 0), std::invalid_argument);
+  EXPECT_THROW(EvaluateScaleDrift(e, 41), std::invalid_argument);
+  ExpectThrowsWith([&] { EvaluateScaleDrift(e, 0); }, "at least 1 (got 0)");
+  ExpectThrowsWith([&] { EvaluateScaleDrift(e, 41); }, "41 segments need at least 123");
+  EXPECT_EQ(EvaluateScaleDrift(e, 40).segments.size(), 40u);  // 3 poses each
+}
+
 TEST(Association, NearestWithinToleranceWithTimeOffset) {
   const Trajectory gt = MakeGroundTruth(50);
   Trajectory est = gt;
