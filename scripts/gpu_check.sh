@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The GPU checks of issue #6, on a machine with an NVIDIA GPU, from the bundle that scripts/gpu_bundle.sh packs
+# (copied there as .gpu/gpu_check.sh beside .gpu/bundle.tar.xz). Usage: bash .gpu/gpu_check.sh [OUT_DIR]
+# Writes everything to OUT_DIR/gpu_check.log (default $OUT, else /tmp/gpu_check); about 3-5 minutes.
+#   1. the CUDA tests (test_compute Cuda*: host-side checks and CPU/CUDA equivalence, a whole run included),
+#   2. `mcslam bench pose --compare` at 2^18 hypotheses x 50 / 200 / 1000 points and `bench points --compare`
+#      (evaluations per second; per-call latency including the transfers),
+#   3. the paper's noisy synthetic scenario run end to end on each backend, three times each (wall and CPU time).
+set -uo pipefail
+HERE=$(cd "$(dirname "$0")" && pwd)
+OUT_DIR=${1:-${OUT:-/tmp/gpu_check}}
+mkdir -p "$OUT_DIR"
+exec > >(tee "$OUT_DIR/gpu_check.log") 2>&1
+
+W=/tmp/mcslam_gpu
+rm -rf "$W" && mkdir -p "$W" && tar -xJf "$HERE/bundle.tar.xz" -C "$W" || { echo "gpu_check: cannot unpack $HERE/bundle.tar.xz"; exit 1; }
+nvidia-smi -L || echo "gpu_check: nvidia-smi failed"
+
+# The machine's own loader when the binaries start with it (its glibc at least as new as the build's), else
+# the carried glibc and loader, with the directory of the machine's libcuda after the bundle's libraries.
+RUN=(env "LD_LIBRARY_PATH=$W/lib")
+# GPU_CHECK_LOADER=carried forces the carried one (to try the bundle on a machine whose glibc would do).
+if [[ "${GPU_CHECK_LOADER:-}" == carried ]] || ! "${RUN[@]}" "$W/bin/mcslam" --help >/dev/null 2>&1; then
+  cuda_dir=$(dirname "$(ldconfig -p | awk '/libcuda\.so\.1 /{print $NF; exit}')" 2>/dev/null)
+  for d in /usr/local/nvidia/lib64 /usr/lib/x86_64-linux-gnu /usr/lib64; do
+    [[ -z "$cuda_dir" || "$cuda_dir" == "." ]] && [[ -e "$d/libcuda.so.1" ]] && cuda_dir=$d
+  done
+  RUN=("$W/glibc/ld-linux-x86-64.so.2" --library-path "$W/lib:$W/glibc:${cuda_dir:-/usr/lib/x86_64-linux-gnu}")
+  echo "gpu_check: the machine's glibc ($(ldd --version 2>/dev/null | head -1)) does not run the build; using the carried one"
+fi
+mcslam() { "${RUN[@]}" "$W/bin/mcslam" "$@"; }
+
+echo "== CUDA tests"
+"${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
+
+echo "== pose kernel (2^18 hypotheses), point kernel"
+mcslam bench pose --compare --points 50 200 1000 --repeats 31
+mcslam bench points --compare --repeats 31
+
+echo "== whole synthetic run (paper scenario, 1 px noise, 10 % outliers), 3 times on each backend"
+mcslam synth --out "$W/synth" --noise 1 --outliers 0.1 >/dev/null
+for i in 1 2 3; do
+  for b in cpu cuda; do
+    echo -n "$b run $i: "
+    if ! mcslam run "$W/synth" --backend "$b" --out "$W/run_$b" >"$W/run.log" 2>&1; then
+      echo "failed:"
+      tail -3 "$W/run.log"
+    else
+      tail -1 "$W/run.log"
+    fi
+  done
+done
+echo "== done"
