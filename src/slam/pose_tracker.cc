@@ -27,11 +27,20 @@ void PoseTrackerOptions::Check() const {
     fail(fmt::format("max_distance_px must be in (0, 1e6], got {}", max_distance_px));
   if (min_points < 3) fail(fmt::format("min_points must be >= 3, got {}", min_points));
   if (min_inliers < 3) fail(fmt::format("min_inliers must be >= 3, got {}", min_inliers));
+  if (!(min_inlier_ratio >= 0 && min_inlier_ratio <= 1))
+    fail(fmt::format("min_inlier_ratio must be in [0, 1], got {}", min_inlier_ratio));
   if (!(keyframe_min_inlier_ratio >= 0 && keyframe_min_inlier_ratio <= 1))
     fail(fmt::format("keyframe_min_inlier_ratio must be in [0, 1], got {}", keyframe_min_inlier_ratio));
   if (rounds < 1 || rounds > 16) fail(fmt::format("rounds must be in [1, 16], got {}", rounds));
   if (rounds > hypotheses) fail(fmt::format("rounds ({}) must not exceed hypotheses ({})", rounds, hypotheses));
   if (!(round_shrink > 0 && round_shrink <= 1)) fail(fmt::format("round_shrink must be in (0, 1], got {}", round_shrink));
+}
+
+std::string PoseTrackerOptions::LostReason(int inliers, int scored) const {
+  if (inliers < min_inliers) return fmt::format("{} inliers (< {})", inliers, min_inliers);
+  if (inliers < min_inlier_ratio * scored)
+    return fmt::format("{} inliers of {} scoring points (< {:.0f} %)", inliers, scored, 100 * min_inlier_ratio);
+  return "";
 }
 
 PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& options,
@@ -172,8 +181,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   for (size_t i = 0; i < obs.size(); ++i)
     if ((*inliers)[i]) sum += (*residuals)[i];
   est.mean_inlier_residual_px = est.inliers > 0 ? sum / est.inliers : 0.0;
-  if (est.inliers < options_.min_inliers) {
-    est.lost_reason = fmt::format("{} inliers (< {})", est.inliers, options_.min_inliers);
+  if (est.lost_reason = options_.LostReason(est.inliers, est.scored); !est.lost_reason.empty()) {
     est.cam_from_world = prev;
     return est;
   }

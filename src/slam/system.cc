@@ -670,10 +670,7 @@ PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, s
   }
   est.cam_from_world = *pose;
   est.inliers = tracker_->ClassifyInliers(*pose, obs, res, inl);
-  if (est.inliers < options_.tracker.min_inliers) {
-    est.lost_reason = fmt::format("{} inliers (< {})", est.inliers, options_.tracker.min_inliers);
-    return est;
-  }
+  if (est.lost_reason = options_.tracker.LostReason(est.inliers, est.scored); !est.lost_reason.empty()) return est;
   est.tracked = true;
   est.keyframe = est.inliers >= options_.tracker.keyframe_min_inlier_ratio * est.scored;
   return est;
