@@ -10,7 +10,9 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -67,6 +69,10 @@ struct FrameRow {
   std::string error;  // why skipped
   frontend::FrameStats fe;
   int features = 0, lost_tracks = 0;
+  // Relocalisation in this frame: tried (after a lost frame), matches to map points, PnP inliers (0: failed).
+  bool reloc_tried = false;
+  int reloc_matches = 0, reloc_inliers = 0;
+  double reloc_ms = 0;
   double decode_ms = 0, frame_ms = 0;
   double backend_ms = 0;     // System::Process, wall time
   bool before_init = false;  // the back end had no map when this frame came: its time is initialisation's
@@ -332,6 +338,64 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
 }
 
+// Relocalisation: the features of this frame that are no map point (tracks born since the loss) matched by
+// their descriptors to the map points whose tracks ended (nearest, Lowe's ratio and the remapping's distance
+// cap; one feature for a map point, the closest), together with the map points still tracked, then the
+// System's RANSAC PnP. `relabel` pairs a matched track with its map point.
+struct RelocResult : slam::Relocalisation {
+  std::vector<std::pair<int64_t, int64_t>> relabel;  // track id, map point id
+};
+std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::FrameResult& fr,
+                                      const slam::System& system,
+                                      const std::unordered_map<int64_t, frontend::Descriptor>& lost_descriptors,
+                                      int* num_matches) {
+  const frontend::FrontendOptions& fo = fe.options();
+  std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
+  for (const auto& [id, d] : lost_descriptors)
+    if (const slam::MapPoint* p = system.map().Find(id); p && p->state != slam::PointState::kRemoved)
+      map_side.emplace_back(id, &d);
+  std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  struct Match {
+    float distance;
+    int64_t track;
+    Eigen::Vector2d uv;
+  };
+  std::map<int64_t, Match> best_for_point;  // ordered: the same matches in the same order every run
+  std::vector<slam::RelocalisationMatch> matches;
+  for (const frontend::TrackedFeature& f : fr.features) {
+    if (const slam::MapPoint* p = system.map().Find(f.feature_id); p && p->state != slam::PointState::kRemoved) {
+      matches.push_back({f.feature_id, f.uv_px});
+      continue;
+    }
+    if (map_side.size() < 2) continue;
+    const std::optional<frontend::Descriptor> d = fe.GetDescriptor(f.feature_id);
+    if (!d) continue;
+    float best = std::numeric_limits<float>::infinity(), second = best;
+    int64_t best_id = -1;
+    for (const auto& [id, md] : map_side) {
+      const float dist = frontend::DescriptorDistance(*d, *md);
+      if (dist < best) {
+        second = best, best = dist, best_id = id;
+      } else if (dist < second) {
+        second = dist;
+      }
+    }
+    if (!(best <= fo.remap_max_distance && best < fo.remap_ratio * second)) continue;
+    const auto [it, fresh] = best_for_point.try_emplace(best_id, Match{best, f.feature_id, f.uv_px});
+    if (!fresh && best < it->second.distance) it->second = {best, f.feature_id, f.uv_px};
+  }
+  RelocResult out;
+  for (const auto& [point_id, m] : best_for_point) {
+    matches.push_back({point_id, m.uv});
+    out.relabel.emplace_back(m.track, point_id);
+  }
+  *num_matches = static_cast<int>(matches.size());
+  const std::optional<slam::Relocalisation> r = system.Relocalise(matches);
+  if (!r) return std::nullopt;
+  static_cast<slam::Relocalisation&>(out) = *r;
+  return out;
+}
+
 }  // namespace
 
 // ---- options ---------------------------------------------------------------------------------------------
@@ -379,6 +443,9 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
       ->capture_default_str();
   cmd->add_option("--max-features", o->frontend.max_features, "Front end: most tracks at once")->capture_default_str();
+  cmd->add_flag("--no-relocalise{false}", o->relocalise,
+                "Once lost, only the last pose is searched around (default: the features are also matched to the map "
+                "by their descriptors, and a pose from those restarts the tracking)");
   cmd->add_option("--anchor-every", o->frontend.anchor_every,
                   "Front end: frames between alignments of each track with the patch it was born with (0: off)")
       ->capture_default_str();
@@ -591,8 +658,29 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
       row.lost_tracks = static_cast<int>(fr.lost.size());
 
       row.before_init = !system.initialised();
+      slam::FrameObservations obs = frontend::ToObservations(fr);
+      if (options.relocalise && was_lost && system.initialised()) {
+        const auto t_reloc = Clock::now();
+        row.reloc_tried = true;
+        if (const auto reloc = Relocalise(fe, fr, system, lost_descriptors, &row.reloc_matches)) {
+          row.reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
+          // The inlier features go on under their map points' ids, in this frame's observations too.
+          const std::unordered_set<int64_t> inliers(reloc->inlier_point_ids.begin(), reloc->inlier_point_ids.end());
+          for (const auto& [track_id, point_id] : reloc->relabel) {
+            if (!inliers.count(point_id) || !fe.Relabel(track_id, point_id, lost_descriptors.at(point_id))) continue;
+            for (slam::FeatureObservation& f : obs.features)
+              if (f.feature_id == track_id) f.feature_id = point_id;
+            lost_descriptors.erase(point_id);
+          }
+          obs.pose_hint = reloc->cam_from_world;
+          progress.Clear();
+          spdlog::info("frame {}: relocalised from {} of {} features matched to the map", frame.index,
+                       row.reloc_inliers, row.reloc_matches);
+        }
+        row.reloc_ms = MsSince(t_reloc);
+      }
       const auto t_backend = Clock::now();
-      const std::vector<slam::FrameReport> out_reports = system.Process(frontend::ToObservations(fr));
+      const std::vector<slam::FrameReport> out_reports = system.Process(obs);
       row.backend_ms = MsSince(t_backend);
       ++frames_processed;
       const slam::FrameReport* current = nullptr;
@@ -786,6 +874,20 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                    {"remap_no_candidate", remap_no_candidate},
                    {"remap_no_match", remap_no_match},
                    {"remap_over_budget", remap_over_budget}};
+  {
+    int64_t tried = 0, relocalised = 0;
+    Stage reloc_ms;
+    for (const FrameRow& row : rows) {
+      if (!row.reloc_tried) continue;
+      ++tried;
+      relocalised += row.reloc_inliers > 0;
+      reloc_ms.Add(row.reloc_ms);
+    }
+    j["relocalisation"] = {{"enabled", options.relocalise},
+                           {"tried", tried},
+                           {"relocalised", relocalised},
+                           {"ms", StageJson(reloc_ms)}};
+  }
   // Front end stages and back end stages, over the frames where each did some work (map and adjust run on
   // keyframes only, init before the map exists: the whole of System::Process then, the successful call too).
   j["stages_ms"] = {{"decode", StageJson(decode)},

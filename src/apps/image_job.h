@@ -29,6 +29,9 @@ struct ImageJobOptions {
   int64_t end = -1;              // last frame (inclusive); -1: to the end of the source
   double fps = 0.0;              // stamps of sources without their own (index / fps); 0: the source's
   bool gt_scale = false;         // the first baseline takes its length from the ground truth (--gt-scale)
+  // After a lost frame, each frame's features are matched by their SIFT descriptors to the map points whose
+  // tracks ended, and a pose that enough of them agree with (RANSAC PnP) restarts the tracking there.
+  bool relocalise = true;
   // The back end's defaults are tuned on the paper's synthetic sequence (320x240, f = 500 px, 1 px noise).
   // For image input the job replaces a few of them (see ImageInputDefaults) unless the user set them.
   bool image_defaults = true;

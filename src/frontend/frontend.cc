@@ -778,6 +778,22 @@ std::optional<Descriptor> Frontend::GetDescriptor(int64_t feature_id) {
   return std::nullopt;
 }
 
+bool Frontend::Relabel(int64_t from, int64_t to, const std::optional<Descriptor>& descriptor) {
+  Impl& m = *impl_;
+  m.JoinDescription();
+  if (to < 0 || to >= m.next_id || from == to) return false;
+  Track* track = nullptr;
+  for (Track& t : m.tracks) {
+    if (t.id == to) return false;
+    if (t.id == from) track = &t;
+  }
+  if (!track) return false;
+  track->id = to;
+  track->remapped = true;
+  if (descriptor) track->descriptor = descriptor;
+  return true;
+}
+
 void Frontend::Reset() {
   impl_->JoinDescription();
   impl_->tracks.clear();

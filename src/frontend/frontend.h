@@ -163,6 +163,11 @@ class Frontend {
   // The descriptor of a live track (waits for it when still pending); nullopt for an id not tracked now.
   std::optional<Descriptor> GetDescriptor(int64_t feature_id);
 
+  // The live track `from` goes on as `to` (relocalisation matched it to that map point's feature): from
+  // now on it is reported under `to` and keeps the descriptor `to` was described with. false (and no
+  // change) when `from` is not live, or `to` is live or was never issued by this front end.
+  bool Relabel(int64_t from, int64_t to, const std::optional<Descriptor>& descriptor = std::nullopt);
+
   // Drops every track (ids go on increasing, never reused) and forgets the previous frame.
   void Reset();
   size_t NumTracks() const;

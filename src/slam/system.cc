@@ -86,6 +86,8 @@ void MappingOptions::Check() const {
 void SystemOptions::Check() const {
   if (ba_iterations < 1) Fail(fmt::format("ba_iterations must be >= 1, got {}", ba_iterations));
   if (ba_fixed_keyframes < 1) Fail(fmt::format("ba_fixed_keyframes must be >= 1, got {}", ba_fixed_keyframes));
+  if (relocalise_min_inliers < 6)
+    Fail(fmt::format("relocalise_min_inliers must be >= 6, got {}", relocalise_min_inliers));
   tracker.Check();
   init.Check();
   mapping.Check();
@@ -140,7 +142,7 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     out.assign(1, r);
     return out;
   }
-  out.push_back(TrackFrame(slot));
+  out.push_back(TrackFrame(slot, frame.pose_hint));
   if (settling_ && out.front().status == FrameStatus::kTracked &&
       ParallaxFromReference(slot) >= next_settle_parallax_deg_) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -484,7 +486,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   return true;
 }
 
-FrameReport System::TrackFrame(int slot) {
+FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   FrameReport r;
   FrameRecord& fr = map_.frames[slot];
   r.index = fr.index;
@@ -501,7 +503,13 @@ FrameReport System::TrackFrame(int slot) {
   }
   std::vector<double> res;
   std::vector<uint8_t> inl;
-  const Pose prev = map_.frames[last_posed_slot_].cam_from_world;
+  const Pose prev = pose_hint ? *pose_hint : map_.frames[last_posed_slot_].cam_from_world;
+  // After relocalisation the inlier flags are those of the last tracked frame, long ago: the points that
+  // score are those that agree with the hint instead.
+  if (pose_hint && tracker_) {
+    tracker_->ClassifyInliers(*pose_hint, obs, &res, &inl);
+    for (size_t i = 0; i < obs.size(); ++i) obs[i].was_inlier = inl[i] != 0;
+  }
   const PoseEstimate est = options_.pose_method == PoseMethod::kPnp
                                ? EstimatePosePnp(obs, &res, &inl)
                                : tracker_->Track(prev, obs, static_cast<uint64_t>(fr.index), &res, &inl);
@@ -643,6 +651,41 @@ std::vector<int> System::WindowSlots() const {
   for (int wi : FibonacciWindow(static_cast<int>(map_.keyframes.size()), options_.mapping.window))
     if (map_.frames[map_.keyframes[wi]].has_pose) window.push_back(map_.keyframes[wi]);
   return window;
+}
+
+std::optional<Relocalisation> System::Relocalise(const std::vector<RelocalisationMatch>& matches) const {
+  if (!initialised_) return std::nullopt;
+  std::vector<Eigen::Vector3d> P;
+  std::vector<Eigen::Vector2d> uv, uv_px;
+  std::vector<int64_t> ids;
+  for (const RelocalisationMatch& m : matches) {
+    const MapPoint* p = map_.Find(m.point_id);
+    if (!p || p->state == PointState::kRemoved || !m.uv_px.allFinite()) continue;
+    const Eigen::Vector2d u = camera_.UndistortPixel(m.uv_px);
+    if (!u.allFinite()) continue;
+    P.push_back(p->position_in_world);
+    uv_px.push_back(u);
+    uv.push_back(ideal_.PixelToNormalized(u));
+    ids.push_back(m.point_id);
+  }
+  if (static_cast<int>(P.size()) < options_.relocalise_min_inliers) return std::nullopt;
+  geometry::PnpOptions po;
+  po.focal_px = focal_px_;
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = options_.relocalise_min_inliers;
+  po.iterations = 500;  // no prior and maybe half the matches wrong
+  const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+  if (!pose) return std::nullopt;
+  Relocalisation r;
+  r.cam_from_world = *pose;
+  r.matches = static_cast<int>(P.size());
+  for (size_t i = 0; i < P.size(); ++i) {
+    Eigen::Vector2d proj;
+    if (ideal_.ProjectWorld(*pose, P[i], &proj) && (proj - uv_px[i]).norm() <= options_.tracker.inlier_threshold_px)
+      r.inlier_point_ids.push_back(ids[i]);
+  }
+  if (static_cast<int>(r.inlier_point_ids.size()) < options_.relocalise_min_inliers) return std::nullopt;
+  return r;
 }
 
 PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,

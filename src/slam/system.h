@@ -105,7 +105,21 @@ struct SystemOptions {
   // (the map's scale is arbitrary, so an absolute floor would mean nothing).
   double sigma_trans_floor_rel_depth = 0.0007;
   uint64_t seed = 1;
+  // Relocalisation (System::Relocalise): a pose is accepted when at least this many of the matches agree
+  // with it (RANSAC PnP, the tracker's inlier threshold).
+  int relocalise_min_inliers = 15;
   void Check() const;
+};
+
+// A feature of the current frame matched (by descriptor) to a map point: an input of System::Relocalise.
+struct RelocalisationMatch {
+  int64_t point_id = 0;
+  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // as the camera saw it (distorted pixels)
+};
+struct Relocalisation {
+  Pose cam_from_world;
+  std::vector<int64_t> inlier_point_ids;  // the matches that agree with it
+  int matches = 0;
 };
 
 enum class FrameStatus { kWaitingForInit, kTracked, kLost };
@@ -142,6 +156,12 @@ class System {
   // earlier 'waiting' ones).
   std::vector<FrameReport> Process(const FrameObservations& frame);
 
+  // After the track is lost: the pose of a frame from features matched to map points by their look alone
+  // (no pose prior), by RANSAC PnP on the points that are in the map. nullopt when fewer than
+  // relocalise_min_inliers matches agree, or before initialisation. Changes nothing; the caller passes the
+  // pose as the frame's pose_hint with the inlier features under their map points' ids.
+  std::optional<Relocalisation> Relocalise(const std::vector<RelocalisationMatch>& matches) const;
+
   // For --gt-scale: the true distance between the camera centres at two stamps, when known. The first
   // baseline is then scaled to it instead of to 1.
   void SetBaselineOracle(std::function<std::optional<double>(double, double)> oracle) { oracle_ = std::move(oracle); }
@@ -164,7 +184,7 @@ class System {
   // is above the outlier threshold leaves the map. Returns how many left.
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   void Settle(int slot, std::vector<FrameReport>* out);
-  FrameReport TrackFrame(int slot);
+  FrameReport TrackFrame(int slot, const std::optional<Pose>& pose_hint);
   int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);

@@ -2,9 +2,12 @@
 // What the back end consumes: per frame, the tracked features (feature id -> pixel). The back end knows
 // nothing of images (../shared/DESIGN.md, the seam between front end and back end).
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
+
+#include "core/pose.h"
 
 namespace mcslam::slam {
 
@@ -17,6 +20,9 @@ struct FrameObservations {
   int64_t index = 0;
   double stamp_s = 0;
   std::vector<FeatureObservation> features;
+  // cam_from_world found by relocalisation (System::Relocalise) for this frame: the pose step searches
+  // around it instead of around the last pose.
+  std::optional<Pose> pose_hint;
 };
 
 }  // namespace mcslam::slam

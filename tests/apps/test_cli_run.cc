@@ -186,35 +186,55 @@ TEST(CliRun, RenderedPaperScenarioMeetsThePapersPrecisionFromImages) {
   EXPECT_LT(Field(r.output, "rot_mean_deg"), 1.0) << r.output;
 }
 
-// A second of unreadable frames: the tracks that survive the jump are mostly wrong. The frames after it are
-// lost (nothing here finds the map again from that far), never tracked wrong: before the inlier-ratio rule
-// frame 150 was taken with 10 of 37 points agreeing and every later frame followed, 0.5-0.8 m off.
-TEST(CliRun, FramesAfterAGapAreLostNotTrackedWrong) {
-  TempDir dir;
-  const auto s = RunMcslam("synth --scenario paper --seed 1 --render --frames 170 --out " + dir / "s");
-  ASSERT_EQ(s.exit_code, 0) << s.output;
-  for (int i = 120; i < 150; ++i) testing::WriteText(dir / fmt::format("s/images/{:06d}.png", i), "");
-  const auto r = RunMcslam("run " + dir / "s --dataset synthetic --out " + dir / "r");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_EQ(Field(r.output, "skipped"), 30) << r.output;
-  EXPECT_GE(Field(r.output, "tracked"), 120) << r.output;  // every frame before the gap
-  std::istringstream csv(ReadText(dir / "r/frames.csv"));
-  std::string line;
-  std::getline(csv, line);
+// A second of unreadable frames (120-149 of 170). Most tracks survive the jump, but the pose is too far from
+// the last one for the Monte Carlo search around it: frame 150 finds 10 of 37 points agreeing (lost: before
+// the inlier-ratio rule that was taken as tracking, 0.77 m off, and every later frame followed it, 0.5-0.8 m).
+// Relocalisation (RANSAC PnP on the frame's features matched to map points) then finds the pose at frame
+// 151 with 36 of 37, and tracking goes on (measured: 139 tracked, worst 1.4 cm); without it every frame
+// after the gap is lost. Either way no frame is tracked wrong.
+struct GapRun {
   int tracked_after_gap = 0;
   double worst_m = 0;
+  std::string output;
+};
+GapRun RunOverAGap(const std::string& scenario, const std::string& out, const std::string& flags) {
+  GapRun g;
+  const auto r = RunMcslam("run " + scenario + " --dataset synthetic --out " + out + " " + flags);
+  g.output = r.output;
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(Field(r.output, "skipped"), 30) << r.output;
+  std::istringstream csv(ReadText(out + "/frames.csv"));
+  std::string line;
+  std::getline(csv, line);
   while (std::getline(csv, line)) {
     std::vector<std::string> f;
     std::stringstream ls(line);
     for (std::string c; std::getline(ls, c, ',');) f.push_back(c);
-    ASSERT_GT(f.size(), 18u) << line;
-    if (f[2] != "tracked") continue;
-    tracked_after_gap += std::stoi(f[0]) >= 150;
-    worst_m = std::max(worst_m, std::stod(f[17]));  // trans_err_m, after the Sim(3) alignment
+    if (f.size() <= 18u || f[2] != "tracked") continue;
+    g.tracked_after_gap += std::stoi(f[0]) >= 150;
+    g.worst_m = std::max(g.worst_m, std::stod(f[17]));  // trans_err_m, after the Sim(3) alignment
   }
-  // The tracked frames, the ones after the gap included if any, stay as good as the run before the gap
-  // (1.1 cm worst measured); a frame tracked wrong would be tens of centimetres off.
-  EXPECT_LT(worst_m, 0.05) << "tracked after the gap: " << tracked_after_gap;
+  return g;
+}
+
+TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
+  TempDir dir;
+  const auto s = RunMcslam("synth --scenario paper --seed 1 --render --frames 170 --out " + dir / "s");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  for (int i = 120; i < 150; ++i) testing::WriteText(dir / fmt::format("s/images/{:06d}.png", i), "");
+  const GapRun with = RunOverAGap(dir / "s", dir / "r", "");
+  EXPECT_GE(Field(with.output, "tracked"), 120 + 18) << with.output;  // all before; all but 1-2 after
+  EXPECT_GE(with.tracked_after_gap, 18) << with.output;
+  // A frame tracked wrong is tens of centimetres off; the run before the gap alone has 1.1 cm at worst.
+  EXPECT_LT(with.worst_m, 0.05);
+  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+  EXPECT_GE(report["relocalisation"]["relocalised"].get<int>(), 1) << report["relocalisation"].dump();
+  EXPECT_NE(with.output.find("relocalised from"), std::string::npos) << with.output;
+
+  const GapRun without = RunOverAGap(dir / "s", dir / "n", "--no-relocalise");
+  EXPECT_EQ(without.tracked_after_gap, 0) << without.output;
+  EXPECT_EQ(Field(without.output, "tracked"), 120) << without.output;
+  EXPECT_LT(without.worst_m, 0.05);
 }
 
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {

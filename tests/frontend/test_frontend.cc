@@ -287,6 +287,37 @@ TEST(Frontend, IdsAreUniqueStableAndNeverReused) {
   EXPECT_EQ(fe.NextFeatureId(), max_id + 1);
 }
 
+// Relocalisation re-labels a live track with the id of the map point it was matched to: from then on the
+// track is reported under that id; never onto an id that is live or was never issued.
+TEST(Frontend, RelabelGivesALiveTrackAnEndedIdAndNothingElse) {
+  const MovingTexture tex(kSize, 6);
+  Frontend fe;
+  const FrameResult first = fe.Process(tex.Frame(0, 0), 0, 0.0);
+  ASSERT_GE(first.features.size(), 3u);
+  const int64_t ended = first.features[0].feature_id, ended2 = first.features[1].feature_id;
+  fe.Reset();  // every track ends; their ids stay issued
+  const FrameResult second = fe.Process(tex.Frame(2, 1), 1, 0.1);
+  ASSERT_GE(second.features.size(), 3u);
+  const int64_t a = second.features[0].feature_id, b = second.features[1].feature_id;
+  const Eigen::Vector2d a_at = second.features[0].uv_px;
+  Descriptor look{};
+  look[0] = 42.0f;
+  EXPECT_FALSE(fe.Relabel(a, fe.NextFeatureId(), look));  // never issued
+  EXPECT_FALSE(fe.Relabel(a, b));                          // live
+  EXPECT_FALSE(fe.Relabel(ended, ended2));                 // `from` is not live
+  EXPECT_FALSE(fe.Relabel(a, a));
+  ASSERT_TRUE(fe.Relabel(a, ended, look));
+  EXPECT_FALSE(fe.Relabel(b, ended));  // now live
+  EXPECT_EQ(fe.GetDescriptor(ended), std::optional<Descriptor>(look));
+  EXPECT_FALSE(fe.GetDescriptor(a).has_value());
+  const FrameResult third = fe.Process(tex.Frame(4, 2), 2, 0.2);
+  const TrackedFeature* f = Find(third, ended);
+  ASSERT_NE(f, nullptr);
+  EXPECT_EQ(Find(third, a), nullptr);
+  EXPECT_LT((f->uv_px - a_at - Eigen::Vector2d(2, 1)).norm(), 0.25);  // the same texture point, moved by (2, 1)
+  EXPECT_FALSE(Lost(third, a));
+}
+
 TEST(Frontend, KalmanPredictionCutsTheInitialErrorOfLucasKanade) {
   const MovingTexture tex(kSize, 7);
   const Eigen::Vector2d v(4.0, -2.5);  // px per frame, constant
