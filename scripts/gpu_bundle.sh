@@ -47,7 +47,7 @@ for d in ['/usr/local/cuda/lib64', '/usr/local/cuda/targets/x86_64-linux/lib']:
 GLIBC = {'libc.so.6', 'libm.so.6', 'libdl.so.2', 'libpthread.so.0', 'librt.so.1', 'ld-linux-x86-64.so.2',
          'libresolv.so.2', 'libutil.so.1', 'libmvec.so.1'}
 # The libraries behind OpenCV's video input and its rarer image codecs: stubbed.
-PLUGINS = {'libopencv_videoio.so.406', 'libopencv_imgcodecs.so.406'}
+PLUGINS = ('libopencv_videoio.so', 'libopencv_imgcodecs.so')  # any OpenCV version
 KEEP_CODECS = {'libjpeg.so.62', 'libpng16.so.16', 'libwebp.so.7', 'libtiff.so.6', 'libopenjp2.so.7'}
 stubs = {}   # soname -> set of (symbol, version or None) the kept libraries import from it
 kept, todo = set(), list(bins)
@@ -55,7 +55,7 @@ while todo:
     f = todo.pop()
     for so in needed(f):
         if so in GLIBC or so in kept or so in stubs: continue
-        if os.path.basename(f) in PLUGINS and so not in KEEP_CODECS and not so.startswith('libopencv_') \
+        if os.path.basename(f).startswith(PLUGINS) and so not in KEEP_CODECS and not so.startswith('libopencv_') \
                 and so not in ('libstdc++.so.6', 'libgcc_s.so.1'):
             stubs[so] = set()
             continue
@@ -103,7 +103,10 @@ for so, syms in stubs.items():
     subprocess.run(['gcc', '-shared', '-nostdlib', '-o', os.path.join(stage, 'lib', so), base + '.s',
                     f'-Wl,-soname,{so}', f'-Wl,--version-script,{base}.map'], check=True)
 for so in GLIBC:
-    if so in paths: shutil.copy2(os.path.realpath(paths[so]), os.path.join(stage, 'glibc', so))
+    if so in paths:
+        shutil.copy2(os.path.realpath(paths[so]), os.path.join(stage, 'glibc', so))
+    elif so in ('libc.so.6', 'ld-linux-x86-64.so.2'):
+        sys.exit(f'gpu_bundle: cannot find {so} to carry')
 print(f'gpu_bundle: {len(kept)} libraries kept, {len(stubs)} stubbed: {" ".join(sorted(stubs))}')
 EOF
 

@@ -10,44 +10,56 @@ set -uo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 OUT_DIR=${1:-${OUT:-/tmp/gpu_check}}
 mkdir -p "$OUT_DIR"
-exec > >(tee "$OUT_DIR/gpu_check.log") 2>&1
+failed=0
+step() {  # runs a command; a failure is remembered for the exit status
+  "$@" || { echo "gpu_check: FAILED (exit $?): $*"; failed=1; }
+}
 
+main() {
 W=/tmp/mcslam_gpu
-rm -rf "$W" && mkdir -p "$W" && tar -xJf "$HERE/bundle.tar.xz" -C "$W" || { echo "gpu_check: cannot unpack $HERE/bundle.tar.xz"; exit 1; }
+rm -rf "$W" && mkdir -p "$W" && tar -xJf "$HERE/bundle.tar.xz" -C "$W" || { echo "gpu_check: cannot unpack $HERE/bundle.tar.xz"; return 1; }
 nvidia-smi -L || echo "gpu_check: nvidia-smi failed"
 
 # The machine's own loader when the binaries start with it (its glibc at least as new as the build's), else
 # the carried glibc and loader, with the directory of the machine's libcuda after the bundle's libraries.
-RUN=(env "LD_LIBRARY_PATH=$W/lib")
 # GPU_CHECK_LOADER=carried forces the carried one (to try the bundle on a machine whose glibc would do).
-if [[ "${GPU_CHECK_LOADER:-}" == carried ]] || ! "${RUN[@]}" "$W/bin/mcslam" --help >/dev/null 2>&1; then
-  cuda_dir=$(dirname "$(ldconfig -p | awk '/libcuda\.so\.1 /{print $NF; exit}')" 2>/dev/null)
+RUN=(env "LD_LIBRARY_PATH=$W/lib")
+if [[ "${GPU_CHECK_LOADER:-}" == carried ]] || ! probe=$("${RUN[@]}" "$W/bin/mcslam" --help 2>&1 >/dev/null); then
+  cuda_dir=$(ldconfig -p 2>/dev/null | awk '/libcuda\.so\.1 .*x86-64/{print $NF; exit}')
+  cuda_dir=${cuda_dir:+$(dirname "$cuda_dir")}
   for d in /usr/local/nvidia/lib64 /usr/lib/x86_64-linux-gnu /usr/lib64; do
-    [[ -z "$cuda_dir" || "$cuda_dir" == "." ]] && [[ -e "$d/libcuda.so.1" ]] && cuda_dir=$d
+    [[ -z "$cuda_dir" && -e "$d/libcuda.so.1" ]] && cuda_dir=$d
   done
   RUN=("$W/glibc/ld-linux-x86-64.so.2" --library-path "$W/lib:$W/glibc:${cuda_dir:-/usr/lib/x86_64-linux-gnu}")
-  echo "gpu_check: the machine's glibc ($(ldd --version 2>/dev/null | head -1)) does not run the build; using the carried one"
+  echo "gpu_check: using the carried glibc ($(ldd --version 2>/dev/null | head -1) here); the machine's loader said: ${probe:-(forced)}"
 fi
 mcslam() { "${RUN[@]}" "$W/bin/mcslam" "$@"; }
 
 echo "== CUDA tests"
-"${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
+step "${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
 
 echo "== pose kernel (2^18 hypotheses), point kernel"
-mcslam bench pose --compare --points 50 200 1000 --repeats 31
-mcslam bench points --compare --repeats 31
+step mcslam bench pose --compare --points 50 200 1000 --repeats 31
+step mcslam bench points --compare --repeats 31
 
 echo "== whole synthetic run (paper scenario, 1 px noise, 10 % outliers), 3 times on each backend"
-mcslam synth --out "$W/synth" --noise 1 --outliers 0.1 >/dev/null
+step mcslam synth --out "$W/synth" --noise 1 --outliers 0.1
 for i in 1 2 3; do
   for b in cpu cuda; do
     echo -n "$b run $i: "
     if ! mcslam run "$W/synth" --backend "$b" --out "$W/run_$b" >"$W/run.log" 2>&1; then
       echo "failed:"
       tail -3 "$W/run.log"
+      failed=1
     else
       tail -1 "$W/run.log"
     fi
   done
 done
-echo "== done"
+echo "== done ($([[ $failed == 0 ]] && echo "all steps passed" || echo "some steps FAILED"))"
+return $failed
+}
+
+# The log is written by tee, which the pipeline waits for: the last lines are never lost.
+main 2>&1 | tee "$OUT_DIR/gpu_check.log"
+exit "${PIPESTATUS[0]}"

@@ -64,10 +64,10 @@ void RunEval(const EvalArgs& a) {
     std::fprintf(stderr,
                  "mcslam eval: warning: the camera positions lie on a line; the alignment's rotation about it is "
                  "not determined, so rotation errors are not meaningful (ATE is)\n");
-  if (!a.csv_path.empty()) eval::WriteFrameErrorsCsv(a.csv_path, errors);
   // Checked before anything is printed: a bad --segments is an error, not half an answer.
   std::optional<eval::ScaleDrift> drift;
   if (a.segments > 0) drift = eval::EvaluateScaleDrift(errors, a.segments);
+  if (!a.csv_path.empty()) eval::WriteFrameErrorsCsv(a.csv_path, errors);
   // stdout carries the summary line (then, with --segments, one line per segment), so scripts can parse it.
   std::fputs((eval::FormatSummary(errors) + "\n").c_str(), stdout);
   if (drift) {
@@ -76,8 +76,10 @@ void RunEval(const EvalArgs& a) {
                stdout);
     for (size_t k = 0; k < drift->segments.size(); ++k) {
       const eval::SegmentErrors& g = drift->segments[k];
-      std::fputs(fmt::format("segment={} poses={}-{} stamps={:.6g}-{:.6g} scale={:.6g} scale_vs_whole={:.6g} "
-                             "ate_rmse={:.6g}\n",
+      // Keys of their own (not the summary's scale= and ate_rmse=), so that a key=value parser of the whole
+      // output keeps the whole run's figures.
+      std::fputs(fmt::format("segment={} poses={}-{} first_stamp={:.6f} last_stamp={:.6f} segment_scale={:.6g} "
+                             "scale_vs_whole={:.6g} segment_ate_rmse={:.6g}\n",
                              k, g.first, g.first + g.count - 1, g.first_stamp_s, g.last_stamp_s, g.scale,
                              g.scale_vs_whole, g.ate_m.rmse)
                      .c_str(),

@@ -11,6 +11,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -49,6 +50,9 @@ constexpr double kImageSigmaRotDeg = 0.5;
 // Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
 // of the corners in its window, and a point lost long ago is rarely found again.
 constexpr size_t kMaxRemapRequests = 200;
+// Relocalisation compares each new track with this many lost map points at most, the most recently seen:
+// the cost of a try stays bounded however long the run (at 400 tracks, ~25 ms here).
+constexpr size_t kMaxRelocalisationPoints = 2000;
 
 bool AllDigits(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
@@ -350,10 +354,16 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
                                       const std::unordered_map<int64_t, frontend::Descriptor>& lost_descriptors,
                                       int* num_matches) {
   const frontend::FrontendOptions& fo = fe.options();
-  std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
+  std::vector<std::tuple<int64_t, int64_t, const frontend::Descriptor*>> recent;  // last seen, id, look
   for (const auto& [id, d] : lost_descriptors)
     if (const slam::MapPoint* p = system.map().Find(id); p && p->state != slam::PointState::kRemoved)
-      map_side.emplace_back(id, &d);
+      recent.emplace_back(p->last_seen_frame, id, &d);
+  std::sort(recent.begin(), recent.end(), [](const auto& a, const auto& b) {
+    return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) < std::get<1>(b);
+  });
+  if (recent.size() > kMaxRelocalisationPoints) recent.resize(kMaxRelocalisationPoints);
+  std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
+  for (const auto& [seen, id, d] : recent) map_side.emplace_back(id, d);
   std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   struct Match {
     float distance;
@@ -583,6 +593,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::string init_note, failure;
   int tracked = 0, lost = 0;
   bool was_lost = false;
+  bool skipped_since_processed = false;  // frames were skipped since the last one processed
   int64_t frames_processed = 0, frames_read = 0;
   Progress progress(last >= 0 ? std::optional<int64_t>(last) : std::nullopt);
   const RunClock clock;  // wall and process CPU time of the frames' processing
@@ -612,6 +623,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, frame.error);
         row.skipped = true;
+        skipped_since_processed = true;
         row.error = frame.error;
         row.frame_ms = MsSince(t_frame);
         rows.push_back(std::move(row));
@@ -643,6 +655,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, e.what());
         row.skipped = true;
+        skipped_since_processed = true;
         row.error = e.what();
         row.frame_ms = MsSince(t_frame);
         rows.push_back(std::move(row));
@@ -659,9 +672,15 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
 
       row.before_init = !system.initialised();
       slam::FrameObservations obs = frontend::ToObservations(fr);
-      if (options.relocalise && was_lost && system.initialised()) {
+      // After a lost frame, and after unreadable frames (the camera may have moved far meanwhile).
+      if (options.relocalise && (was_lost || skipped_since_processed) && system.initialised()) {
         const auto t_reloc = Clock::now();
         row.reloc_tried = true;
+        // Map points that left the map need no descriptor any more.
+        std::erase_if(lost_descriptors, [&](const auto& kv) {
+          const slam::MapPoint* p = system.map().Find(kv.first);
+          return !p || p->state == slam::PointState::kRemoved;
+        });
         if (const auto reloc = Relocalise(fe, fr, system, lost_descriptors, &row.reloc_matches)) {
           row.reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
           // The inlier features go on under their map points' ids, in this frame's observations too.
@@ -679,6 +698,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         }
         row.reloc_ms = MsSince(t_reloc);
       }
+      skipped_since_processed = false;
       const auto t_backend = Clock::now();
       const std::vector<slam::FrameReport> out_reports = system.Process(obs);
       row.backend_ms = MsSince(t_backend);
@@ -875,17 +895,24 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                    {"remap_no_match", remap_no_match},
                    {"remap_over_budget", remap_over_budget}};
   {
-    int64_t tried = 0, relocalised = 0;
+    // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
+    // pose step succeeded from it.
+    int64_t tried = 0, pose_found = 0, reloc_tracked = 0;
     Stage reloc_ms;
     for (const FrameRow& row : rows) {
       if (!row.reloc_tried) continue;
       ++tried;
-      relocalised += row.reloc_inliers > 0;
       reloc_ms.Add(row.reloc_ms);
+      if (row.reloc_inliers == 0) continue;
+      ++pose_found;
+      if (auto it = report_of_index.find(row.index);
+          it != report_of_index.end() && reports[it->second].status == slam::FrameStatus::kTracked)
+        ++reloc_tracked;
     }
     j["relocalisation"] = {{"enabled", options.relocalise},
                            {"tried", tried},
-                           {"relocalised", relocalised},
+                           {"pose_found", pose_found},
+                           {"tracked", reloc_tracked},
                            {"ms", StageJson(reloc_ms)}};
   }
   // Front end stages and back end stages, over the frames where each did some work (map and adjust run on

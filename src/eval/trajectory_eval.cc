@@ -282,7 +282,7 @@ ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments) {
   if (segments < 1) throw std::invalid_argument(fmt::format("segments must be at least 1 (got {})", segments));
   if (n < 3 * static_cast<size_t>(segments))
     throw std::invalid_argument(fmt::format("{} segments need at least {} matched poses, 3 each (got {})", segments,
-                                            3 * segments, n));
+                                            3 * static_cast<int64_t>(segments), n));
   // The positions as aligned for the whole run: a segment's alignment of those onto the ground truth has
   // the scale relative to the whole run's.
   const double whole = errors.alignment_result.gt_world_from_est_world.scale;
@@ -296,12 +296,22 @@ ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments) {
       est.push_back(errors.frames[i].est_position_aligned);
       gt.push_back(errors.frames[i].gt_position);
     }
-    const Similarity3 a = AlignPositions(est, gt, Alignment::kSim3).gt_world_from_est_world;
     SegmentErrors seg;
     seg.first = first;
     seg.count = end - first;
     seg.first_stamp_s = errors.frames[first].stamp_s;
     seg.last_stamp_s = errors.frames[end - 1].stamp_s;
+    Similarity3 a;
+    try {
+      a = AlignPositions(est, gt, Alignment::kSim3).gt_world_from_est_world;
+    } catch (const std::runtime_error&) {
+      // A segment whose positions are all the same (a camera standing still) has no scale: NaN, and it
+      // takes no part in the drift.
+      seg.scale = seg.scale_vs_whole = kNaN;
+      seg.ate_m = ComputeStats({});
+      out.segments.push_back(seg);
+      continue;
+    }
     seg.scale_vs_whole = a.scale;
     seg.scale = whole * a.scale;
     std::vector<double> e;
@@ -311,7 +321,7 @@ ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments) {
     hi = std::max(hi, seg.scale);
     out.segments.push_back(seg);
   }
-  out.max_over_min_scale = hi / lo;
+  out.max_over_min_scale = hi > 0 ? hi / lo : kNaN;
   return out;
 }
 

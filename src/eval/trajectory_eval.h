@@ -130,17 +130,19 @@ TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajecto
 struct SegmentErrors {
   size_t first = 0, count = 0;           // matched poses first .. first + count - 1 (association order)
   double first_stamp_s = 0, last_stamp_s = 0;
-  double scale = 1;                      // ground-truth metres per estimate unit in this segment
-  double scale_vs_whole = 1;             // scale / the whole run's (Sim(3)) scale
-  ErrorStats ate_m;                      // position error after the segment's own alignment
+  // Ground-truth metres per estimate unit in this segment, and that over the whole run's (Sim(3)) scale;
+  // NaN for a segment whose positions are all the same (nothing to align).
+  double scale = 1;
+  double scale_vs_whole = 1;
+  ErrorStats ate_m;                      // position error after the segment's own alignment (NaN as above)
 };
 struct ScaleDrift {
   std::vector<SegmentErrors> segments;
-  double max_over_min_scale = 1;  // largest segment scale over the smallest: 1 for no drift
+  double max_over_min_scale = 1;  // largest segment scale over the smallest (NaN ones left out): 1 for no drift
 };
 // Splits the matched poses of `errors` into `segments` consecutive runs of (nearly) equal length and aligns
 // each on its own with Sim(3). Throws std::invalid_argument when segments < 1 or a segment would hold fewer
-// than 3 poses, std::runtime_error when a segment cannot be aligned (all its positions equal).
+// than 3 poses.
 ScaleDrift EvaluateScaleDrift(const TrajectoryErrors& errors, int segments);
 
 // CSV, one row per matched pose:

@@ -1,6 +1,6 @@
 #pragma once
 // The front end's per-frame result as the back end's input. Header only: slam/types.h is plain data
-// (Eigen only), so the front end library does not link the back end.
+// (Eigen and core's Pose only), so the front end library does not link the back end.
 #include "frontend/frontend.h"
 #include "slam/types.h"
 

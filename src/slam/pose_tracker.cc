@@ -36,11 +36,17 @@ void PoseTrackerOptions::Check() const {
   if (!(round_shrink > 0 && round_shrink <= 1)) fail(fmt::format("round_shrink must be in (0, 1], got {}", round_shrink));
 }
 
-std::string PoseTrackerOptions::LostReason(int inliers, int scored) const {
+std::string PoseTrackerOptions::LostReason(int inliers, int scoring_inliers, int scored) const {
   if (inliers < min_inliers) return fmt::format("{} inliers (< {})", inliers, min_inliers);
-  if (inliers < min_inlier_ratio * scored)
-    return fmt::format("{} inliers of {} scoring points (< {:.0f} %)", inliers, scored, 100 * min_inlier_ratio);
+  if (scoring_inliers < min_inlier_ratio * scored)
+    return fmt::format("{} inliers of {} scoring points (< {:.0f} %)", scoring_inliers, scored, 100 * min_inlier_ratio);
   return "";
+}
+
+int ScoringInliers(const std::vector<PointObservation>& obs, const std::vector<uint8_t>& inliers) {
+  int n = 0;
+  for (size_t i = 0; i < obs.size(); ++i) n += obs[i].was_inlier && inliers[i];
+  return n;
 }
 
 PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& options,
@@ -181,7 +187,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   for (size_t i = 0; i < obs.size(); ++i)
     if ((*inliers)[i]) sum += (*residuals)[i];
   est.mean_inlier_residual_px = est.inliers > 0 ? sum / est.inliers : 0.0;
-  if (est.lost_reason = options_.LostReason(est.inliers, est.scored); !est.lost_reason.empty()) {
+  if (est.lost_reason = options_.LostReason(est.inliers, ScoringInliers(obs, *inliers), est.scored);
+      !est.lost_reason.empty()) {
     est.cam_from_world = prev;
     return est;
   }

@@ -49,8 +49,10 @@ struct PoseTrackerOptions {
   int rounds = 3;                      // resample around the best with shrinking spread; 1 = the paper's one-shot sampling
   double round_shrink = 0.35;          // spread factor from one round to the next
   void Check() const;                  // throws std::invalid_argument naming the bad field
-  // Why an estimate with these counts is no pose (min_inliers, min_inlier_ratio); empty when it is one.
-  std::string LostReason(int inliers, int scored) const;
+  // Why an estimate is no pose; empty when it is one. `inliers`: observations within the threshold (against
+  // min_inliers); `scoring_inliers` of the `scored` points (against min_inlier_ratio).
+  std::string LostReason(int inliers, int scoring_inliers, int scored) const;
+
 };
 
 // One map point seen in this frame.
@@ -71,6 +73,9 @@ struct PoseEstimate {
   Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();  // the translation spread used (m)
   std::string lost_reason;       // why, when not tracked
 };
+
+// How many of the observations that took part in the score (was_inlier) are flagged in `inliers`.
+int ScoringInliers(const std::vector<PointObservation>& obs, const std::vector<uint8_t>& inliers);
 
 class PoseTracker {
  public:

@@ -506,7 +506,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   const Pose prev = pose_hint ? *pose_hint : map_.frames[last_posed_slot_].cam_from_world;
   // After relocalisation the inlier flags are those of the last tracked frame, long ago: the points that
   // score are those that agree with the hint instead.
-  if (pose_hint && tracker_) {
+  if (pose_hint) {
     tracker_->ClassifyInliers(*pose_hint, obs, &res, &inl);
     for (size_t i = 0; i < obs.size(); ++i) obs[i].was_inlier = inl[i] != 0;
   }
@@ -531,6 +531,8 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   r.status = FrameStatus::kTracked;
   r.has_pose = true;
   r.cam_from_world = est.cam_from_world;
+  // A relocalised pose may be far from where the smoother's state is: it starts again there.
+  if (pose_hint) smoother_.Reset();
   r.smoothed_cam_from_world = smoother_.Update(est.cam_from_world);
   if (est.keyframe) {
     map_.keyframes.push_back(slot);
@@ -681,7 +683,7 @@ std::optional<Relocalisation> System::Relocalise(const std::vector<Relocalisatio
   r.matches = static_cast<int>(P.size());
   for (size_t i = 0; i < P.size(); ++i) {
     Eigen::Vector2d proj;
-    if (ideal_.ProjectWorld(*pose, P[i], &proj) && (proj - uv_px[i]).norm() <= options_.tracker.inlier_threshold_px)
+    if (ideal_.ProjectWorld(*pose, P[i], &proj) && (proj - uv_px[i]).norm() < options_.tracker.inlier_threshold_px)
       r.inlier_point_ids.push_back(ids[i]);
   }
   if (static_cast<int>(r.inlier_point_ids.size()) < options_.relocalise_min_inliers) return std::nullopt;
@@ -713,7 +715,9 @@ PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, s
   }
   est.cam_from_world = *pose;
   est.inliers = tracker_->ClassifyInliers(*pose, obs, res, inl);
-  if (est.lost_reason = options_.tracker.LostReason(est.inliers, est.scored); !est.lost_reason.empty()) return est;
+  if (est.lost_reason = options_.tracker.LostReason(est.inliers, ScoringInliers(obs, *inl), est.scored);
+      !est.lost_reason.empty())
+    return est;
   est.tracked = true;
   est.keyframe = est.inliers >= options_.tracker.keyframe_min_inlier_ratio * est.scored;
   return est;

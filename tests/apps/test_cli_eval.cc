@@ -95,7 +95,10 @@ TEST(CliEval, SegmentsShowAScaleDrift) {
   EXPECT_EQ(Field(r.output, "segments"), 2) << r.output;
   // 6 significant digits printed.
   EXPECT_NEAR(Field(r.output, "scale_max_over_min"), 1.25, 1e-5) << r.output;
-  EXPECT_NE(r.output.find("segment=1 poses=50-99"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("segment=1 poses=50-99 first_stamp="), std::string::npos) << r.output;
+  // The segments' figures have keys of their own: the summary's scale is still the first and only scale=.
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '='), 14 + 2 + 2 * 7) << r.output;
+  EXPECT_EQ(r.output.find(" scale=", r.output.find('\n')), std::string::npos) << r.output;
   EXPECT_GT(Field(r.output, "ate_rmse"), 0.01) << r.output;  // the whole run's, hiding the drift
   // Too many segments for 100 poses: an error, and nothing printed as if it had worked.
   const auto bad = RunMcslam("eval " + (dir / "gt.txt") + " " + (dir / "est.txt") + " --segments 40");

@@ -107,9 +107,11 @@ TEST(PoseTracker, LostWhenMostScoringPointsDisagree) {
   EXPECT_LT(e.cam_from_world.t.norm(), 0.01);  // the exact points' pose; 1 cm at 3 m is ~1.7 px
   // The counts alone.
   const PoseTrackerOptions o;
-  EXPECT_EQ(o.LostReason(30, 37), "");
-  EXPECT_EQ(o.LostReason(10, 37), "10 inliers of 37 scoring points (< 50 %)");
-  EXPECT_EQ(o.LostReason(7, 7), "7 inliers (< 8)");
+  EXPECT_EQ(o.LostReason(30, 30, 37), "");
+  EXPECT_EQ(o.LostReason(10, 10, 37), "10 inliers of 37 scoring points (< 50 %)");
+  // Inliers among the points that did not score do not make up for the scoring ones.
+  EXPECT_EQ(o.LostReason(20, 10, 37), "10 inliers of 37 scoring points (< 50 %)");
+  EXPECT_EQ(o.LostReason(7, 7, 7), "7 inliers (< 8)");
   PoseTrackerOptions bad;
   bad.min_inlier_ratio = 1.5;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
