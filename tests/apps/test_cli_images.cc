@@ -359,6 +359,31 @@ TEST(CliImagesReal, Kitti06AllFramesTracked) {
   EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.10) << run.output;
 }
 
+// Relocalisation on real images: a copy of the sequence with frames 25 and 26 unreadable (0.2 s, ~2 m of
+// driving). The Monte Carlo search around frame 24's pose cannot reach frame 27 (6 inliers); RANSAC PnP on
+// its features matched to the map can (26 of 52), and every later frame is tracked. Measured: 49/49 tracked,
+// ATE 7.2 cm (no jump at the gap: 8-11 cm on either side of it after the alignment); without relocalisation
+// 25 tracked and the rest lost.
+TEST(CliImagesReal, Kitti06RelocalisesAfterUnreadableFrames) {
+  REAL_SEQUENCE_OR_SKIP(seq, "kitti_odometry_06_frames000-050");
+  TempDir dir;
+  const fs::path copy = fs::path(dir / "kitti");
+  fs::copy(seq, copy, fs::copy_options::recursive);
+  for (int i : {25, 26}) testing::WriteText((copy / "image_0" / fmt::format("{:06d}.png", i)).string(), "");
+  const std::string flags = "--hypotheses 65536 --anchor-mismatch reanchor";
+  const RealRun run = RunOnRealSequence(copy.string(), dir, flags);
+  if (run.report.is_null()) return;
+  EXPECT_EQ(run.report["skipped"], 2) << run.output;
+  EXPECT_EQ(run.report["tracked"], 49) << run.output;  // every readable frame
+  EXPECT_GE(run.report["relocalisation"]["tracked"].get<int>(), 1) << run.report["relocalisation"].dump();
+  // The bound for the whole sequence (measured 0.072 m; 0.023 m without the gap).
+  EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.10) << run.output;
+  TempDir off;
+  const RealRun without = RunOnRealSequence(copy.string(), off, flags + " --no-relocalise");
+  if (without.report.is_null()) return;
+  EXPECT_LE(without.report["tracked"].get<int>(), 30) << without.output;
+}
+
 // The paper's baselines (§8) end to end on real images: PnP for the pose step, local bundle adjustment for the
 // structure step, through the same front end and initialisation as the Monte Carlo steps (scripts/compare.sh).
 TEST(CliImagesReal, Kitti06PnpPoseAndBundleAdjustment) {
