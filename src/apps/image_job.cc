@@ -353,7 +353,6 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
                                       const slam::System& system,
                                       const std::unordered_map<int64_t, frontend::Descriptor>& lost_descriptors,
                                       int* num_matches) {
-  const frontend::FrontendOptions& fo = fe.options();
   std::vector<std::tuple<int64_t, int64_t, const frontend::Descriptor*>> recent;  // last seen, id, look
   for (const auto& [id, d] : lost_descriptors)
     if (const slam::MapPoint* p = system.map().Find(id); p && p->state != slam::PointState::kRemoved)
@@ -365,6 +364,8 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
   std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
   for (const auto& [seen, id, d] : recent) map_side.emplace_back(id, d);
   std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<const frontend::Descriptor*> looks;
+  for (const auto& [id, d] : map_side) looks.push_back(d);
   struct Match {
     float distance;
     int64_t track;
@@ -380,19 +381,10 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
     if (map_side.size() < 2) continue;
     const std::optional<frontend::Descriptor> d = fe.GetDescriptor(f.feature_id);
     if (!d) continue;
-    float best = std::numeric_limits<float>::infinity(), second = best;
-    int64_t best_id = -1;
-    for (const auto& [id, md] : map_side) {
-      const float dist = frontend::DescriptorDistance(*d, *md);
-      if (dist < best) {
-        second = best, best = dist, best_id = id;
-      } else if (dist < second) {
-        second = dist;
-      }
-    }
-    if (!(best <= fo.remap_max_distance && best < fo.remap_ratio * second)) continue;
-    const auto [it, fresh] = best_for_point.try_emplace(best_id, Match{best, f.feature_id, f.uv_px});
-    if (!fresh && best < it->second.distance) it->second = {best, f.feature_id, f.uv_px};
+    const std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, fe.options());
+    if (!m) continue;
+    const auto [it, fresh] = best_for_point.try_emplace(map_side[m->index].first, Match{m->distance, f.feature_id, f.uv_px});
+    if (!fresh && m->distance < it->second.distance) it->second = {m->distance, f.feature_id, f.uv_px};
   }
   RelocResult out;
   for (const auto& [point_id, m] : best_for_point) {

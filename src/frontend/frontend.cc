@@ -167,6 +167,25 @@ float DescriptorDistance(const Descriptor& a, const Descriptor& b) {
   return std::sqrt(s);
 }
 
+std::optional<DescriptorMatch> MatchDescriptor(const Descriptor& query, std::span<const Descriptor* const> candidates,
+                                               const FrontendOptions& options) {
+  float best = std::numeric_limits<float>::infinity(), second = best;
+  size_t best_index = 0;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (!candidates[i]) continue;
+    const float dist = DescriptorDistance(query, *candidates[i]);
+    if (dist < best) {
+      second = best;
+      best = dist;
+      best_index = i;
+    } else if (dist < second) {
+      second = dist;
+    }
+  }
+  if (!(best <= options.remap_max_distance && best < options.remap_ratio * second)) return std::nullopt;
+  return DescriptorMatch{best_index, best};
+}
+
 void FrontendOptions::Check() const {
   auto fail = [](const std::string& what) { throw std::invalid_argument("FrontendOptions." + what); };
   if (max_features < 1) fail(fmt::format("max_features must be >= 1 (got {})", max_features));
@@ -633,27 +652,19 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
       size_t candidate;
     };
     std::vector<Match> matches;
+    std::vector<const Descriptor*> looks;
     for (size_t r = 0; r < requests.size(); ++r) {
       if (window_candidates[r].empty()) {
         ++st.remap_no_candidate;
         continue;
       }
-      float best = std::numeric_limits<float>::infinity(), second = best;
-      size_t best_k = 0;
+      looks.clear();
       for (size_t k : window_candidates[r]) {
-        const auto& d = descriptors.at(k);
-        if (!d) continue;
-        const float dist = DescriptorDistance(requests[r]->descriptor, *d);
-        if (dist < best) {
-          second = best;
-          best = dist;
-          best_k = k;
-        } else if (dist < second) {
-          second = dist;
-        }
+        const std::optional<Descriptor>& d = descriptors.at(k);
+        looks.push_back(d ? &*d : nullptr);
       }
-      if (best <= o.remap_max_distance && best < o.remap_ratio * second) {
-        matches.push_back({best, r, best_k});
+      if (const auto m = MatchDescriptor(requests[r]->descriptor, looks, o)) {
+        matches.push_back({m->distance, r, window_candidates[r][m->index]});
       } else {
         ++st.remap_no_match;
       }

@@ -84,6 +84,16 @@ struct FrontendOptions {
   void Check() const;
 };
 
+// The candidate nearest to `query` (L2) when it passes the remapping's tests: within
+// options.remap_max_distance, and nearer than options.remap_ratio times the second nearest (Lowe's test).
+// Null candidates are skipped; of equal distances the first wins. Remapping and relocalisation both match so.
+struct DescriptorMatch {
+  size_t index = 0;  // into `candidates`
+  float distance = 0;
+};
+std::optional<DescriptorMatch> MatchDescriptor(const Descriptor& query, std::span<const Descriptor* const> candidates,
+                                               const FrontendOptions& options);
+
 // A map point whose track was lost, projected with the current pose estimate.
 struct RemapRequest {
   int64_t feature_id = 0;                           // the id its track had (from this front end)

@@ -25,14 +25,9 @@ inline std::vector<int> FibonacciWindow(int num_keyframes, int count) {
 // How far back (in keyframes) a window of `count` reaches once there are enough keyframes: the last offset
 // FibonacciWindow gives (0 for count <= 1).
 inline long FibonacciReach(int count) {
-  long reach = 0, a = 1, b = 2;
-  for (int k = 1; k < count; ++k) {
-    reach = a;
-    const long next = a + b;
-    a = b;
-    b = next;
-  }
-  return reach;
+  constexpr int kEnough = 1 << 30;  // more keyframes than any window of an int count reaches back
+  const std::vector<int> window = FibonacciWindow(kEnough, count);
+  return window.empty() ? 0 : kEnough - 1 - window.back();
 }
 
 }  // namespace mcslam::slam

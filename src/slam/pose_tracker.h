@@ -52,7 +52,6 @@ struct PoseTrackerOptions {
   // Why an estimate is no pose; empty when it is one. `inliers`: observations within the threshold (against
   // min_inliers); `scoring_inliers` of the `scored` points (against min_inlier_ratio).
   std::string LostReason(int inliers, int scoring_inliers, int scored) const;
-
 };
 
 // One map point seen in this frame.

@@ -657,16 +657,17 @@ std::vector<int> System::WindowSlots() const {
 
 std::optional<Relocalisation> System::Relocalise(const std::vector<RelocalisationMatch>& matches) const {
   if (!initialised_) return std::nullopt;
+  std::vector<PointObservation> obs;
   std::vector<Eigen::Vector3d> P;
-  std::vector<Eigen::Vector2d> uv, uv_px;
+  std::vector<Eigen::Vector2d> uv;
   std::vector<int64_t> ids;
   for (const RelocalisationMatch& m : matches) {
     const MapPoint* p = map_.Find(m.point_id);
     if (!p || p->state == PointState::kRemoved || !m.uv_px.allFinite()) continue;
     const Eigen::Vector2d u = camera_.UndistortPixel(m.uv_px);
     if (!u.allFinite()) continue;
+    obs.push_back({p->position_in_world, u, true});
     P.push_back(p->position_in_world);
-    uv_px.push_back(u);
     uv.push_back(ideal_.PixelToNormalized(u));
     ids.push_back(m.point_id);
   }
@@ -681,11 +682,12 @@ std::optional<Relocalisation> System::Relocalise(const std::vector<Relocalisatio
   Relocalisation r;
   r.cam_from_world = *pose;
   r.matches = static_cast<int>(P.size());
-  for (size_t i = 0; i < P.size(); ++i) {
-    Eigen::Vector2d proj;
-    if (ideal_.ProjectWorld(*pose, P[i], &proj) && (proj - uv_px[i]).norm() < options_.tracker.inlier_threshold_px)
-      r.inlier_point_ids.push_back(ids[i]);
-  }
+  // Inliers as the pose step counts them.
+  std::vector<double> res;
+  std::vector<uint8_t> inl;
+  tracker_->ClassifyInliers(*pose, obs, &res, &inl);
+  for (size_t i = 0; i < ids.size(); ++i)
+    if (inl[i]) r.inlier_point_ids.push_back(ids[i]);
   if (static_cast<int>(r.inlier_point_ids.size()) < options_.relocalise_min_inliers) return std::nullopt;
   return r;
 }
