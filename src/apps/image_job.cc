@@ -73,7 +73,8 @@ struct FrameRow {
   std::string error;  // why skipped
   frontend::FrameStats fe;
   int features = 0, lost_tracks = 0;
-  // Relocalisation in this frame: tried (after a lost frame), matches to map points, PnP inliers (0: failed).
+  // Relocalisation in this frame: tried (after a lost or skipped frame), matches to map points, PnP inliers
+  // (0: no pose found).
   bool reloc_tried = false;
   int reloc_matches = 0, reloc_inliers = 0;
   double reloc_ms = 0;
