@@ -94,12 +94,20 @@ void BenchPose(const PoseBenchArgs& a) {
   const auto kernels = MakeBenchKernels<compute::PoseKernel>(a, MakePoseKernelFor);
   const compute::NormalTable table(a.hypotheses, 1);
   for (int np : a.points) {
+    // Two point sets in turn, as frames bring new features: a device backend keeps the points of its last
+    // call and sends only new ones, so scoring one set again and again would time no transfer at all.
+    // They differ in one feature by 1e-3 px; both backends make the same number of calls, so their last
+    // (the one compared) scores the same set.
     const compute::PoseFixture fx(np);
+    compute::PoseFixture fx_next = fx;
+    fx_next.u[0] += 1e-3f;
     std::vector<std::pair<CallTimes, compute::BestHypothesis>> runs;
     for (const auto& kernel : kernels) {
       compute::BestHypothesis best;
+      int call = 0;
       const CallTimes t = TimeCalls(a.repeats, [&] {
-        best = kernel->Score(fx.sampling, fx.View(), fx.params, table, a.hypotheses);
+        const compute::PoseFixture& f = call++ % 2 == 0 ? fx : fx_next;
+        best = kernel->Score(f.sampling, f.View(), f.params, table, a.hypotheses);
         if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
       });
       fmt::print("bench pose backend={} {} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "

@@ -21,6 +21,7 @@
 #include "compute/cuda/candidate.h"
 #include "compute/cuda/cuda_kernels.h"
 #include "compute/cuda/point_staging.h"
+#include "compute/cuda/pose_staging.h"
 #include "compute/cuda/table_key.h"
 #include "compute/point_kernel.h"
 #include "compute/pose_fixture.h"
@@ -179,6 +180,40 @@ TEST(CudaHost, TableKeyChangesWhenTheTableChangesAndOnlyThen) {
   t.column(6)[2777] += 1.0f;
   EXPECT_NE(before, cuda::MakeNormalTableKey(t).fingerprint);
   EXPECT_EQ(cuda::MakeNormalTableKey(NormalTable()).count, 0);
+}
+
+// The pose kernel keeps the points of its last call on the device and sends a call's points only when they
+// differ from those: the comparison must see any change, in any column, and nothing else.
+TEST(CudaHost, PosePointsAreSentAgainWhenAnyValueChangesAndOnlyThen) {
+  const PoseFixture fx(37);
+  std::vector<float> staged(cuda::StagedPosePointFloats(37));
+  cuda::StagePosePoints(fx.View(), staged.data());
+  const int n = 37;
+  for (int c = 0; c < 5; ++c) {  // column c of the staging holds the points' column c
+    const float* column[5] = {fx.x.data(), fx.y.data(), fx.z.data(), fx.u.data(), fx.v.data()};
+    EXPECT_EQ(0, std::memcmp(staged.data() + c * n, column[c], sizeof(float) * n)) << "column " << c;
+  }
+  EXPECT_TRUE(cuda::SameAsStaged(fx.View(), staged.data(), n));
+  // The same values at other addresses are the same points.
+  const PoseFixture copy = fx;
+  EXPECT_TRUE(cuda::SameAsStaged(copy.View(), staged.data(), n));
+  // One value of one column, by the smallest step a float can take, in the first, a middle and the last point.
+  for (int c = 0; c < 5; ++c)
+    for (int i : {0, n / 2, n - 1}) {
+      PoseFixture changed = fx;
+      std::vector<float>* column[5] = {&changed.x, &changed.y, &changed.z, &changed.u, &changed.v};
+      float& value = (*column[c])[i];
+      value = std::nextafter(value, std::numeric_limits<float>::infinity());
+      EXPECT_FALSE(cuda::SameAsStaged(changed.View(), staged.data(), n)) << "column " << c << ", point " << i;
+    }
+  // Fewer points (a prefix of the same columns), none, and nothing staged yet.
+  PoseScoringPoints prefix = fx.View();
+  prefix.count = n - 1;
+  EXPECT_FALSE(cuda::SameAsStaged(prefix, staged.data(), n));
+  EXPECT_FALSE(cuda::SameAsStaged(fx.View(), nullptr, n));
+  PoseScoringPoints none;
+  EXPECT_TRUE(cuda::SameAsStaged(none, nullptr, 0));
+  EXPECT_FALSE(cuda::SameAsStaged(none, staged.data(), n));
 }
 
 // Point problems: PointFixture (compute/pose_fixture.h): five cameras on an arc, point p seen by p % 6 of them
@@ -391,12 +426,14 @@ TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
   const BestHypothesis a = gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count(), first.data());
   const cuda::CudaKernelStats warm = Stats(*gpu);
   EXPECT_EQ(warm.table_uploads, 1);
+  EXPECT_EQ(warm.point_uploads, 1);
   for (int r = 0; r < 5; ++r) {
     const BestHypothesis b = gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count(), again.data());
     EXPECT_EQ(b.index, a.index);  // deterministic: same problem, same answer, bit for bit
     EXPECT_EQ(b.score, a.score);
     EXPECT_EQ(again, first);
   }
+  EXPECT_EQ(Stats(*gpu).point_uploads, 1);  // the same points (a frame's later rounds): found on the device
   // Smaller problems (fewer hypotheses, fewer points, no all_scores): no new allocation, no new upload.
   const PoseFixture small(50);
   gpu->Score(small.sampling, small.View(), small.params, table, 1000);
@@ -423,6 +460,37 @@ TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
   EXPECT_EQ(x.index, x2.index);
   EXPECT_EQ(x.score, x2.score);
   EXPECT_EQ(y.score, gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count()).score);
+}
+
+// Points kept on the device between calls: a call whose points changed, even by one ulp in one feature,
+// scores the new points; the same points again score as before; both memory paths (constant memory up to
+// 2048 points, global memory above), and another kernel's points in constant memory in between.
+TEST(CudaEquivalence, PoseKernelScoresTheCallsOwnPointsWhenTheyChange) {
+  REQUIRE_CUDA_DEVICE();
+  const NormalTable table(1 << 14, 12);
+  for (int np : {200, 3000}) {
+    auto gpu = CudaPose();
+    PoseFixture fx(np, /*seed=*/5);
+    std::vector<float> before(table.count()), after(table.count());
+    gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count(), before.data());
+    gpu->Score(fx.sampling, fx.View(), fx.params, table, table.count(), after.data());
+    EXPECT_EQ(after, before) << np << " points, the same again";
+    EXPECT_EQ(Stats(*gpu).point_uploads, 1) << np;
+    // One feature moved 5 px, in place (same arrays): hypotheses' scores move with it, as on the CPU.
+    fx.u[np / 2] += 5.0f;
+    ExpectPoseEquivalent(*gpu, fx, table, table.count(), std::to_string(np) + " points, one feature moved");
+    EXPECT_EQ(Stats(*gpu).point_uploads, 2) << np;
+    // One ulp in the last point's depth.
+    fx.z[np - 1] = std::nextafter(fx.z[np - 1], 100.0f);
+    ExpectPoseEquivalent(*gpu, fx, table, table.count(), std::to_string(np) + " points, one ulp");
+    EXPECT_EQ(Stats(*gpu).point_uploads, 3) << np;
+    // Another kernel writes its own points (constant memory is shared): ours are sent again.
+    auto other = CudaPose();
+    const PoseFixture others(150, /*seed=*/6);
+    ExpectPoseEquivalent(*other, others, table, table.count(), "the other kernel");
+    ExpectPoseEquivalent(*gpu, fx, table, table.count(), std::to_string(np) + " points after another kernel");
+    EXPECT_EQ(Stats(*gpu).point_uploads, np <= 2048 ? 4 : 3) << np;
+  }
 }
 
 void ExpectPointEquivalent(PointKernel& gpu, const PointFixture& sc, const NormalTable& table, int samples,

@@ -168,6 +168,7 @@ class CudaPointKernel final : public PointKernel {
     const PointResources& r = *res_;
     st.calls = r.calls;
     st.table_uploads = r.table.uploads();
+    st.point_uploads = r.calls;  // one copy of the whole problem per call
     st.device_allocations = r.table.allocations() + r.problem.allocations() + r.best.allocations();
     st.pinned_allocations = r.host_problem.allocations() + r.host_best.allocations();
     return st;

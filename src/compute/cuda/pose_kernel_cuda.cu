@@ -7,12 +7,15 @@
 // The points and features (x, y, z, u, v) are staged in pinned memory and copied asynchronously on the
 // kernel's stream: into constant memory when there are at most kMaxConstantPoints of them (every thread of
 // a warp reads the same point at the same time: the constant cache's broadcast case), else into global
-// memory, from which each block reads them through shared-memory tiles.
+// memory, from which each block reads them through shared-memory tiles. They stay there: a call with the
+// very points of the call before (a frame's second and third sampling rounds) sends nothing but the
+// sampling centre and spreads, which travel as kernel arguments (pose_staging.h).
 #include <cub/block/block_reduce.cuh>
 #include <cuda_runtime.h>
 
 #include <algorithm>
-#include <cstring>
+#include <atomic>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -24,6 +27,7 @@
 #include "compute/cuda/cuda_kernels.h"
 #include "compute/cuda/device_buffer.h"
 #include "compute/cuda/device_normal_table.h"
+#include "compute/cuda/pose_staging.h"
 #include "compute/pose_kernel.h"
 #include "compute/pose_math.h"
 
@@ -47,6 +51,19 @@ __constant__ float c_points[5 * kMaxConstantPoints];
 std::mutex& ConstantPointsMutex() {
   static std::mutex m;
   return m;
+}
+
+// The kernel object whose points c_points holds (its id; 0: none), read and written under
+// ConstantPointsMutex. One for the process, not one per device: a kernel on another device writing its
+// own c_points makes the others send theirs again, which is only ever one copy too many.
+uint64_t& ConstantPointsOwner() {
+  static uint64_t owner = 0;
+  return owner;
+}
+
+uint64_t NewKernelId() {
+  static std::atomic<uint64_t> next{1};
+  return next.fetch_add(1);
 }
 
 // Scores hypotheses [blockIdx.x * kPoseBlock, +kPoseBlock) of `count`; writes each score to scores[h]
@@ -118,11 +135,18 @@ __global__ void __launch_bounds__(kReduceBlock)
   if (threadIdx.x == 0) *out = best;
 }
 
+// Where the staged points are on the device as well (valid only after a call that completed).
+enum class PointsOnDevice { kNone, kConstant, kGlobal };
+
 // Everything that lives on (or is pinned for) the device; destroyed with the kernel's device current.
+
 struct PoseResources {
   Stream stream;
   DeviceNormalTable table;
-  PinnedBuffer<float> host_points;     // 5 columns of staged points
+  PinnedBuffer<float> host_points;     // 5 columns of staged points (pose_staging.h)
+  int staged_count = -1;               // points in host_points; -1: none staged
+  PointsOnDevice on_device = PointsOnDevice::kNone;
+  long point_uploads = 0;
   DeviceBuffer<float> points;          // the same, when they do not fit in constant memory
   DeviceBuffer<Candidate> block_best;  // one per block of the scoring kernel
   DeviceBuffer<Candidate> best;        // the winner
@@ -133,7 +157,7 @@ struct PoseResources {
 
 class CudaPoseKernel final : public PoseKernel {
  public:
-  explicit CudaPoseKernel(int device) : device_(device) {
+  explicit CudaPoseKernel(int device) : device_(device), id_(NewKernelId()) {
     const int n = CudaDeviceCount();
     if (device < 0 || device >= n)
       throw std::runtime_error("CUDA pose kernel: no CUDA device " + std::to_string(device) + " (" +
@@ -172,12 +196,17 @@ class CudaPoseKernel final : public PoseKernel {
     const cudaStream_t stream = r.stream.get();
     const float* d_normals = r.table.Sync(normals, stream);
 
-    // Stage the points as 5 columns; pinned, so the copy below is asynchronous.
-    float* staged = r.host_points.Reserve(5 * static_cast<size_t>(np));
-    const float* columns[5] = {pts.x, pts.y, pts.z, pts.u, pts.v};
-    if (np > 0)
-      for (int c = 0; c < 5; ++c) std::memcpy(staged + static_cast<size_t>(c) * np, columns[c], sizeof(float) * np);
-    const size_t point_bytes = sizeof(float) * 5 * static_cast<size_t>(np);
+    // Stage the points as 5 columns (pinned, so the copy below is asynchronous), unless they are the ones
+    // already staged.
+    const bool same_points = r.staged_count >= 0 && SameAsStaged(pts, r.host_points.get(), r.staged_count);
+    if (!same_points) {
+      r.on_device = PointsOnDevice::kNone;
+      r.staged_count = -1;  // stays so if Reserve throws
+      StagePosePoints(pts, r.host_points.Reserve(StagedPosePointFloats(np)));
+      r.staged_count = np;
+    }
+    const float* staged = r.host_points.get();
+    const size_t point_bytes = sizeof(float) * StagedPosePointFloats(np);
 
     const int blocks = (count + kPoseBlock - 1) / kPoseBlock;
     Candidate* d_block_best = r.block_best.Reserve(blocks);
@@ -190,14 +219,25 @@ class CudaPoseKernel final : public PoseKernel {
     if (in_constant) constant_lock.lock();
     try {
       if (in_constant) {
-        if (np > 0)
-          MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
+        // c_points is shared: ours only if no other kernel wrote it since we did.
+        if (!(same_points && r.on_device == PointsOnDevice::kConstant && ConstantPointsOwner() == id_)) {
+          r.on_device = PointsOnDevice::kNone;
+          ConstantPointsOwner() = id_;
+          if (np > 0)
+            MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
+          ++r.point_uploads;
+        }
         ScorePosesKernel<true><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), nullptr, np,
                                                                   count, d_scores, d_block_best);
         MCSLAM_CUDA_CHECK_LAUNCH("ScorePosesKernel<constant points>");
       } else {
-        float* d_points = r.points.Reserve(5 * static_cast<size_t>(np));
-        MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_points, staged, point_bytes, cudaMemcpyHostToDevice, stream));
+        // The same count as the call that left them there: no reallocation, the points are still there.
+        float* d_points = r.points.Reserve(StagedPosePointFloats(np));
+        if (!(same_points && r.on_device == PointsOnDevice::kGlobal)) {
+          r.on_device = PointsOnDevice::kNone;
+          MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_points, staged, point_bytes, cudaMemcpyHostToDevice, stream));
+          ++r.point_uploads;
+        }
         ScorePosesKernel<false><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), d_points, np,
                                                                    count, d_scores, d_block_best);
         MCSLAM_CUDA_CHECK_LAUNCH("ScorePosesKernel<global points>");
@@ -209,9 +249,12 @@ class CudaPoseKernel final : public PoseKernel {
         MCSLAM_CUDA_CHECK(
             cudaMemcpyAsync(all_scores, d_scores, sizeof(float) * count, cudaMemcpyDeviceToHost, stream));
       r.stream.Synchronize();
+      r.on_device = in_constant ? PointsOnDevice::kConstant : PointsOnDevice::kGlobal;
     } catch (...) {
-      // Whatever was enqueued finishes before the lock (and the staged points) can be reused.
+      // Whatever was enqueued finishes before the lock (and the staged points) can be reused; the next call
+      // sends its points again.
       cudaStreamSynchronize(stream);
+      r.on_device = PointsOnDevice::kNone;
       throw;
     }
     if (constant_lock.owns_lock()) constant_lock.unlock();
@@ -239,6 +282,7 @@ class CudaPoseKernel final : public PoseKernel {
     const PoseResources& r = *res_;
     st.calls = r.calls;
     st.table_uploads = r.table.uploads();
+    st.point_uploads = r.point_uploads;
     st.device_allocations = r.table.allocations() + r.points.allocations() + r.block_best.allocations() +
                             r.best.allocations() + r.scores.allocations();
     st.pinned_allocations = r.host_points.allocations() + r.host_best.allocations();
@@ -247,6 +291,7 @@ class CudaPoseKernel final : public PoseKernel {
 
  private:
   int device_;
+  uint64_t id_;            // this kernel's name as ConstantPointsOwner
   std::mutex call_mutex_;  // the buffers and the stream serve one Score call at a time
   std::unique_ptr<PoseResources> res_;
 };
