@@ -274,6 +274,9 @@ void RegisterRun(CLI::App& app) {
                   "adjustment) each time their median parallax grows by half, until it reaches this (0: never)")
       ->check(CLI::Range(0.0, 89.0))
       ->capture_default_str();
+  cmd->add_flag("--no-pose-before-reference{false}", args->system.init.pose_frames_before_reference,
+                "Leave the frames before the initialisation's reference frame (when it moved on while waiting) "
+                "without a pose instead of placing them against the first map");
   cmd->add_option("--samples", args->system.mapping.samples, "Monte Carlo samples per adjusted point")
       ->check(CLI::Range(1, 1 << 22))
       ->capture_default_str();

@@ -245,25 +245,20 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   const FrameRecord& cur = map_.frames[slot];
   StoreAdjustedPoints(cams, wp, cur.index);
   RefreshInlierFlags(slot);  // at the moved current pose
-  // The posed frames left out of the adjustment: each placed again against the adjusted points (PnP from
-  // the points it sees), or moved with its neighbour in the window when PnP cannot place it.
-  geometry::PnpOptions po;
-  po.focal_px = focal_px_;
-  po.threshold_px = options_.tracker.inlier_threshold_px;
-  po.min_inliers = options_.tracker.min_inliers;
-  for (int k : posed) {
-    if (std::binary_search(window.begin(), window.end(), k)) continue;
+  // The posed frames left out of the adjustment, and those before the reference: each placed again against
+  // the adjusted points (PnP from the points it sees), or moved with its neighbour in the window (the
+  // reference, for a frame before it) when PnP cannot place it.
+  std::vector<int> left_out;
+  for (int k = posed_from_; k < reference_slot_; ++k) left_out.push_back(k);
+  for (int k : posed)
+    if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
+  for (int k : left_out) {
     FrameRecord& f = map_.frames[k];
-    std::vector<Eigen::Vector3d> P;
-    std::vector<Eigen::Vector2d> uv;
-    for (const FeatureUndistorted& o : f.features)
-      if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
-        P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
-    if (const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po)) {
+    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers, 0.0)) {
       f.cam_from_world = *pose;
     } else {
-      const int before = *(std::upper_bound(window.begin(), window.end(), k) - 1);
-      f.cam_from_world = moved_by[before] * f.cam_from_world;
+      const auto after = std::upper_bound(window.begin(), window.end(), k);
+      f.cam_from_world = moved_by[after == window.begin() ? window.front() : *(after - 1)] * f.cam_from_world;
     }
   }
   const std::string note = fmt::format(
@@ -274,12 +269,43 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   out->front().cam_from_world = cur.cam_from_world;
   out->front().note = note;
   ResidualStats(slot, &out->front());
-  for (int k : posed) {
-    if (k == slot) continue;
+  for (int k = posed_from_; k <= slot; ++k) {
+    if (k == slot || !map_.frames[k].has_pose) continue;
     FrameReport r = PosedReport(k);
     r.pose_update = true;
     out->push_back(r);
   }
+}
+
+std::optional<Pose> System::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const {
+  std::vector<Eigen::Vector3d> P;
+  std::vector<Eigen::Vector2d> uv;
+  for (const FeatureUndistorted& o : map_.frames[slot].features)
+    if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
+      P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
+  geometry::PnpOptions po;
+  po.focal_px = focal_px_;
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = min_inliers;
+  int inliers = 0;
+  std::optional<Pose> pose = geometry::SolvePnp(P, uv, po, &inliers);
+  if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
+  return pose;
+}
+
+int System::PoseFramesBefore(int before_slot, int first_slot) {
+  int first = before_slot;
+  for (int k = before_slot - 1; k >= std::max(first_slot, 0); --k) {
+    FrameRecord& f = map_.frames[k];
+    if (f.has_pose || f.features.empty()) break;
+    const std::optional<Pose> pose =
+        PlaceByPnp(k, options_.tracker.min_inliers, options_.tracker.min_inlier_ratio);
+    if (!pose) break;
+    f.has_pose = true;
+    f.cam_from_world = *pose;
+    first = k;
+  }
+  return first;
 }
 
 bool System::TryInitialise(std::vector<FrameReport>* out) {
@@ -464,8 +490,17 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
   tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
   initialised_ = true;
+  posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
 
   out->clear();
+  // The frames before the reference: poses, unsmoothed (the smoother runs forward from the reference).
+  for (int k = posed_from_; k < reference_slot_; ++k) {
+    FrameReport r = PosedReport(k);
+    r.initialisation = true;
+    r.smoothed_cam_from_world = r.cam_from_world;
+    r.note = fmt::format("posed at the initialisation (frame {}), before its reference frame", cur.index);
+    out->push_back(r);
+  }
   smoother_.Reset();
   for (size_t w = 0; w < window.size(); ++w) {
     FrameReport r = PosedReport(window[w]);
@@ -641,8 +676,10 @@ void System::PruneHistory(int slot) {
   const long reach = FibonacciReach(options_.mapping.window);
   const long nkf = static_cast<long>(map_.keyframes.size());
   if (nkf > 0) keep_from = std::min(keep_from, map_.keyframes[static_cast<size_t>(std::max(0L, nkf - 1 - reach))]);
-  // The initialisation and the settling work on every frame since the reference.
-  if ((!initialised_ || settling_) && reference_slot_ >= 0) keep_from = std::min(keep_from, reference_slot_);
+  // The initialisation and the settling work on every frame since the reference (or the first frame posed
+  // before it).
+  if ((!initialised_ || settling_) && reference_slot_ >= 0)
+    keep_from = std::min(keep_from, posed_from_ >= 0 ? std::min(posed_from_, reference_slot_) : reference_slot_);
   for (; pruned_until_ < keep_from; ++pruned_until_) {
     std::vector<FeatureUndistorted>().swap(map_.frames[static_cast<size_t>(pruned_until_)].features);
   }

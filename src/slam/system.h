@@ -51,6 +51,11 @@ struct InitOptions {
   // The paper scenario settles at ~100 frames: all of them (keeping a third of them cost 0.5 cm of mean
   // error over six seeds, the map's points being seen fewer times).
   int settle_max_frames = 120;
+  // Frames before the reference: when the reference moved on while waiting (min_common_features), the
+  // frames before it were never posed. After the initialisation each is placed by RANSAC PnP against the
+  // new map, newest first, for as long as one is (at least the tracker's min_inliers agreeing, and at least
+  // half of the map points it sees), and placed again after every settling adjustment.
+  bool pose_frames_before_reference = true;
   void Check() const;
 };
 
@@ -152,8 +157,8 @@ class System {
          std::unique_ptr<compute::PointKernel> point_kernel);
 
   // Processes the next frame. Returns the reports of the frames that became final: normally this frame;
-  // when the map is initialised, also the frames from the reference frame on (their reports replace the
-  // earlier 'waiting' ones).
+  // when the map is initialised, also the frames from the reference frame on, and those before it that
+  // could be placed (their reports replace the earlier 'waiting' ones).
   std::vector<FrameReport> Process(const FrameObservations& frame);
 
   // After the track is lost: the pose of a frame from features matched to map points by their look alone
@@ -184,6 +189,11 @@ class System {
   // is above the outlier threshold leaves the map. Returns how many left.
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   void Settle(int slot, std::vector<FrameReport>* out);
+  // InitOptions::pose_frames_before_reference: places frames before_slot-1, before_slot-2, ... (not before
+  // first_slot) while each can be; the ones placed get poses. Returns the first slot placed (before_slot:
+  // none).
+  int PoseFramesBefore(int before_slot, int first_slot);
+  std::optional<Pose> PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const;
   FrameReport TrackFrame(int slot, const std::optional<Pose>& pose_hint);
   int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
@@ -218,6 +228,7 @@ class System {
   bool settling_ = false;
   double next_settle_parallax_deg_ = 0;
   int init_slot_ = -1;             // the frame the initialisation ended on
+  int posed_from_ = -1;            // the first posed slot: the reference, or a frame before it (pose_frames_before_reference)
   int pruned_until_ = 0;           // frames before this slot have dropped their features (history_frames)
   double init_baseline_ = 1.0;     // its distance from the reference camera: the scale, kept by every settling
 };
