@@ -246,19 +246,23 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   StoreAdjustedPoints(cams, wp, cur.index);
   RefreshInlierFlags(slot);  // at the moved current pose
   // The posed frames left out of the adjustment, and those before the reference: each placed again against
-  // the adjusted points (PnP from the points it sees), or moved with its neighbour in the window (the
-  // reference, for a frame before it) when PnP cannot place it.
+  // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
+  // was first placed with), or else moved with its neighbour in the window: for a frame before the
+  // reference, which stays the world, only the scale changes.
   std::vector<int> left_out;
   for (int k = posed_from_; k < reference_slot_; ++k) left_out.push_back(k);
   for (int k : posed)
     if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
   for (int k : left_out) {
     FrameRecord& f = map_.frames[k];
-    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers, 0.0)) {
+    const bool before_reference = k < reference_slot_;
+    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers,
+                                                    before_reference ? options_.tracker.min_inlier_ratio : 0.0)) {
       f.cam_from_world = *pose;
+    } else if (before_reference) {
+      f.cam_from_world.t *= s;
     } else {
-      const auto after = std::upper_bound(window.begin(), window.end(), k);
-      f.cam_from_world = moved_by[after == window.begin() ? window.front() : *(after - 1)] * f.cam_from_world;
+      f.cam_from_world = moved_by[*(std::upper_bound(window.begin(), window.end(), k) - 1)] * f.cam_from_world;
     }
   }
   const std::string note = fmt::format(
@@ -493,14 +497,6 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
 
   out->clear();
-  // The frames before the reference: poses, unsmoothed (the smoother runs forward from the reference).
-  for (int k = posed_from_; k < reference_slot_; ++k) {
-    FrameReport r = PosedReport(k);
-    r.initialisation = true;
-    r.smoothed_cam_from_world = r.cam_from_world;
-    r.note = fmt::format("posed at the initialisation (frame {}), before its reference frame", cur.index);
-    out->push_back(r);
-  }
   smoother_.Reset();
   for (size_t w = 0; w < window.size(); ++w) {
     FrameReport r = PosedReport(window[w]);
@@ -516,6 +512,15 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
           window.size(), best->median_px);
     }
     r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    out->push_back(r);
+  }
+  // The frames before the reference: poses, unsmoothed (the smoother runs forward from the reference). After
+  // the window's reports, so that the first report with a note is the one that says how the map was made.
+  for (int k = posed_from_; k < reference_slot_; ++k) {
+    FrameReport r = PosedReport(k);
+    r.initialisation = true;
+    r.smoothed_cam_from_world = r.cam_from_world;
+    r.note = fmt::format("posed at the initialisation (frame {}), before its reference frame", cur.index);
     out->push_back(r);
   }
   return true;

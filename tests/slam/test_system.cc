@@ -160,10 +160,15 @@ TEST(System, FramesBeforeAMovedReferenceArePosedAgainstTheFirstMap) {
   for (bool pose_before : {true, false}) {
     SystemOptions o = FastOptions();
     o.init.pose_frames_before_reference = pose_before;
+    std::string first_init_note;  // what the CLI logs and report.json keeps as the initialisation's
     const apps::SlamRunResult res =
-        apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), /*gt_scale=*/true);
+        apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), /*gt_scale=*/true,
+                      [&](const FrameReport& r) {
+                        if (r.initialisation && !r.note.empty() && first_init_note.empty()) first_init_note = r.note;
+                      });
     ASSERT_TRUE(res.initialised);
     ASSERT_EQ(res.reports.size(), 120u);
+    EXPECT_EQ(first_init_note.rfind("initialised from frames 11 and", 0), 0u) << first_init_note;
     int reference = -1;  // the first frame the initialisation's window holds
     for (const FrameReport& r : res.reports)
       if (r.initialisation && r.keyframe) {

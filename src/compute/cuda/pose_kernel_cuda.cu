@@ -219,12 +219,12 @@ class CudaPoseKernel final : public PoseKernel {
     if (in_constant) constant_lock.lock();
     try {
       if (in_constant) {
-        // c_points is shared: ours only if no other kernel wrote it since we did.
-        if (!(same_points && r.on_device == PointsOnDevice::kConstant && ConstantPointsOwner() == id_)) {
+        // c_points is shared: ours only if no other kernel wrote it since we did. No points: nothing to send,
+        // nothing read, and another kernel's points stay where they are.
+        if (np > 0 && !(same_points && r.on_device == PointsOnDevice::kConstant && ConstantPointsOwner() == id_)) {
           r.on_device = PointsOnDevice::kNone;
           ConstantPointsOwner() = id_;
-          if (np > 0)
-            MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
+          MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
           ++r.point_uploads;
         }
         ScorePosesKernel<true><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), nullptr, np,
