@@ -3,8 +3,9 @@
 # (copied there as .gpu/gpu_check.sh beside .gpu/bundle.tar.xz). Usage: bash .gpu/gpu_check.sh [OUT_DIR]
 # Writes everything to OUT_DIR/gpu_check.log (default $OUT, else /tmp/gpu_check); about 3-5 minutes.
 #   1. the CUDA tests (test_compute Cuda*: host-side checks and CPU/CUDA equivalence, a whole run included),
-#   2. `mcslam bench pose --compare` at 2^18 hypotheses x 50 / 200 / 1000 points and `bench points --compare`
-#      (evaluations per second; per-call latency including the transfers),
+#   2. `mcslam bench pose --compare` at 2^18 hypotheses x 50 / 200 / 1000 points, once as the paper samples (one
+#      round) and once as `mcslam run` does (3 rounds), and `bench points --compare` (evaluations per second;
+#      per-frame / per-call latency including the transfers),
 #   3. the paper's noisy synthetic scenario run end to end on each backend, three times each (wall and CPU time).
 set -uo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
@@ -40,6 +41,7 @@ step "${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
 
 echo "== pose kernel (2^18 hypotheses), point kernel"
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31
+step mcslam bench pose --compare --points 50 200 1000 --repeats 31 --rounds 3
 step mcslam bench points --compare --repeats 31
 
 echo "== whole synthetic run (paper scenario, 1 px noise, 10 % outliers), 3 times on each backend"

@@ -86,11 +86,14 @@ struct PoseBenchArgs : BenchBackends {
   int hypotheses = 1 << 18;
   std::vector<int> points{200};
   int repeats = 15;
+  int rounds = 1;  // the paper's one-shot sampling; `mcslam run` uses PoseTrackerOptions::rounds
 };
 
 // Several backends run one after the other on the same problem and table; after the first, each is
 // compared with the first (time and chosen hypothesis), which makes a quick equivalence check on a GPU.
 void BenchPose(const PoseBenchArgs& a) {
+  if (a.rounds > a.hypotheses)
+    throw std::invalid_argument(fmt::format("--rounds ({}) must not exceed --hypotheses ({})", a.rounds, a.hypotheses));
   const auto kernels = MakeBenchKernels<compute::PoseKernel>(a, MakePoseKernelFor);
   const compute::NormalTable table(a.hypotheses, 1);
   for (int np : a.points) {
@@ -107,12 +110,16 @@ void BenchPose(const PoseBenchArgs& a) {
       int call = 0;
       const CallTimes t = TimeCalls(a.repeats, [&] {
         const compute::PoseFixture& f = call++ % 2 == 0 ? fx : fx_next;
-        best = kernel->Score(f.sampling, f.View(), f.params, table, a.hypotheses);
+        const double sq[4] = {f.sampling.sigma_q[0], f.sampling.sigma_q[1], f.sampling.sigma_q[2], f.sampling.sigma_q[3]};
+        const double st[3] = {f.sampling.sigma_t[0], f.sampling.sigma_t[1], f.sampling.sigma_t[2]};
+        best = compute::ScoreInRounds(*kernel, f.sampling, sq, st, f.View(), f.params, table, a.hypotheses, a.rounds,
+                                      slam::PoseTrackerOptions{}.round_shrink);
         if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
       });
-      fmt::print("bench pose backend={} {} hypotheses={} points={} repeats={} frame_ms_median={:.3f} "
+      fmt::print("bench pose backend={} {} hypotheses={} points={} rounds={} repeats={} frame_ms_median={:.3f} "
                  "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
-                 BackendName(kernel->kind()), Where(kernel->kind()), a.hypotheses, np, a.repeats, t.median_ms, t.min_ms,
+                 BackendName(kernel->kind()), Where(kernel->kind()), a.hypotheses, np, a.rounds, a.repeats, t.median_ms,
+                 t.min_ms,
                  double(a.hypotheses) * np / (t.median_ms * 1e-3));
       runs.emplace_back(t, best);
     }
@@ -218,6 +225,11 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   pose->add_option("--repeats", pa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
+  pose->add_option("--rounds", pa->rounds,
+                   "Sampling rounds a frame, the hypotheses split among them as `mcslam run --rounds` does (1: the "
+                   "paper's one-shot sampling; run's default is 3)")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str();
   AddBenchBackendFlags(pose, pa.get());
   pose->callback([pa] { BenchPose(*pa); });
 

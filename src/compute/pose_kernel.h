@@ -60,6 +60,17 @@ class PoseKernel {
                                float* all_scores = nullptr) = 0;
 };
 
+// A frame's pose search in rounds (PoseTrackerOptions::rounds): `hypotheses` in all, round r scoring
+// hypotheses / rounds of them (the last round the rest) around the best so far, with the spreads sigma_q and
+// sigma_t times shrink^r. Row 0 of the table is zero, so the centre is scored again in every round and a round
+// never ends worse than the one before. rounds = 1 is the paper's one-shot sampling. Returns the last round's
+// best (index -1 as soon as a round has no winner). The points are the same in every round: a device
+// backend sends them once (compute/cuda/pose_staging.h).
+BestHypothesis ScoreInRounds(PoseKernel& kernel, PoseSampling centre, const double sigma_q[4],
+                             const double sigma_t[3], const PoseScoringPoints& points,
+                             const PoseScoringParams& params, const NormalTable& normals, int hypotheses, int rounds,
+                             double shrink);
+
 // CPU backend: every core (oneTBB), hypotheses vectorised across SIMD lanes. threads <= 0: all cores.
 std::unique_ptr<PoseKernel> MakeCpuPoseKernel(int threads = 0);
 

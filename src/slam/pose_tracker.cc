@@ -159,19 +159,11 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   params.max_distance_px = static_cast<float>(options_.max_distance_px);
   const compute::PoseScoringPoints pts{sx_.data(), sy_.data(), sz_.data(), su_.data(), sv_.data(), est.scored};
 
-  compute::BestHypothesis best;
-  const int per_round = options_.hypotheses / options_.rounds;
-  for (int round = 0; round < options_.rounds; ++round) {
-    const double f = std::pow(options_.round_shrink, round);
-    for (int k = 0; k < 4; ++k) s.sigma_q[k] = static_cast<float>(sigma_q * f);
-    for (int k = 0; k < 3; ++k) s.sigma_t[k] = static_cast<float>(est.sigma_t[k] * f);
-    const int count = round + 1 == options_.rounds ? options_.hypotheses - per_round * round : per_round;
-    // Row 0 of the table is zero, so the centre (the best so far) is always re-scored: rounds never get worse.
-    best = kernel_->Score(s, pts, params, table_, count);
-    if (best.index < 0) break;
-    for (int k = 0; k < 4; ++k) s.q[k] = best.q[k];
-    for (int k = 0; k < 3; ++k) s.t[k] = best.t[k];
-  }
+  const double sigma_q4[4] = {sigma_q, sigma_q, sigma_q, sigma_q};
+  const double sigma_t3[3] = {est.sigma_t[0], est.sigma_t[1], est.sigma_t[2]};
+  const compute::BestHypothesis best = compute::ScoreInRounds(*kernel_, s, sigma_q4, sigma_t3, pts, params, table_,
+                                                              options_.hypotheses, options_.rounds,
+                                                              options_.round_shrink);
 
   if (best.index < 0) {
     est.lost_reason = "no finite hypothesis score";

@@ -243,6 +243,15 @@ TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   const size_t at = r.output.find("evals_per_s=");
   ASSERT_NE(at, std::string::npos);
   EXPECT_GT(std::stod(r.output.substr(at + 12)), 1e6);  // any working kernel does far more than 1e6/s
+  EXPECT_EQ(Field(r.output, "rounds"), 1.0) << r.output;  // the paper's one-shot sampling unless asked
+  // A frame as `mcslam run` searches it: the same hypotheses in 3 rounds.
+  const auto rounds = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 3 --rounds 3");
+  ASSERT_EQ(rounds.exit_code, 0) << rounds.output;
+  EXPECT_EQ(Field(rounds.output, "rounds"), 3.0) << rounds.output;
+  EXPECT_EQ(Field(rounds.output, "hypotheses"), 4096.0) << rounds.output;
+  const auto bad = RunMcslam("bench pose --hypotheses 2 --points 5 --rounds 3");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--rounds (3) must not exceed --hypotheses (2)"), std::string::npos) << bad.output;
 }
 
 TEST(CliBench, PointsPrintsLatencyAndEvaluationsPerSecond) {

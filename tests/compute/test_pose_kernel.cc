@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
+#include <stdexcept>
 #include <vector>
 
 #include "compute/pose_fixture.h"
@@ -104,6 +106,66 @@ TEST(PoseKernelCpu, PointsBehindTheCameraCostTheCap) {
   std::vector<float> scores(64);
   MakeCpuPoseKernel()->Score(fx.sampling, fx.View(), fx.params, table, 64, scores.data());
   for (float s : scores) EXPECT_FLOAT_EQ(s, 21.0f);
+}
+
+// Records every call and forwards it to the CPU kernel.
+class RecordingPoseKernel final : public PoseKernel {
+ public:
+  struct Call {
+    PoseSampling s;
+    int count;
+    BestHypothesis best;
+  };
+  BackendKind kind() const override { return BackendKind::kCpu; }
+  BestHypothesis Score(const PoseSampling& s, const PoseScoringPoints& p, const PoseScoringParams& k,
+                       const NormalTable& n, int count, float* all) override {
+    const BestHypothesis b = cpu_->Score(s, p, k, n, count, all);
+    calls.push_back({s, count, b});
+    return b;
+  }
+  std::vector<Call> calls;
+
+ private:
+  std::unique_ptr<PoseKernel> cpu_ = MakeCpuPoseKernel();
+};
+
+TEST(ScoreInRounds, SplitsTheHypothesesShrinksTheSpreadAndRecentresOnTheBest) {
+  PoseFixture fx(200);
+  for (size_t j = 0; j < fx.x.size(); ++j) fx.u[j] = 500.0f * (fx.x[j] + 0.02f) / fx.z[j];  // 2 cm along x
+  const NormalTable table(10000, 4);
+  const double sq[4] = {0.0087, 0.0087, 0.0087, 0.0087}, st[3] = {0.01, 0.01, 0.01};
+  RecordingPoseKernel k;
+  const BestHypothesis best = ScoreInRounds(k, fx.sampling, sq, st, fx.View(), fx.params, table, 10000, 3, 0.35);
+  ASSERT_EQ(k.calls.size(), 3u);
+  EXPECT_EQ(k.calls[0].count, 3333);
+  EXPECT_EQ(k.calls[1].count, 3333);
+  EXPECT_EQ(k.calls[2].count, 3334);  // the last round takes the rest
+  for (int r = 0; r < 3; ++r) {
+    const double f = std::pow(0.35, r);
+    for (int c = 0; c < 4; ++c) EXPECT_EQ(k.calls[r].s.sigma_q[c], static_cast<float>(sq[c] * f)) << r;
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(k.calls[r].s.sigma_t[c], static_cast<float>(st[c] * f)) << r;
+    if (r == 0) continue;
+    // Centred on the best of the round before, which is scored again (row 0): never worse.
+    for (int c = 0; c < 4; ++c) EXPECT_EQ(k.calls[r].s.q[c], k.calls[r - 1].best.q[c]) << r;
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(k.calls[r].s.t[c], k.calls[r - 1].best.t[c]) << r;
+    EXPECT_LE(k.calls[r].best.score, k.calls[r - 1].best.score) << r;
+  }
+  EXPECT_EQ(best.score, k.calls[2].best.score);
+  EXPECT_EQ(best.index, k.calls[2].best.index);
+  // The first round started from the centre given.
+  for (int c = 0; c < 3; ++c) EXPECT_EQ(k.calls[0].s.t[c], fx.sampling.t[c]);
+  // One round is one call of every hypothesis: the kernel's own answer.
+  RecordingPoseKernel one;
+  const BestHypothesis b1 = ScoreInRounds(one, fx.sampling, sq, st, fx.View(), fx.params, table, 10000, 1, 0.35);
+  ASSERT_EQ(one.calls.size(), 1u);
+  EXPECT_EQ(one.calls[0].count, 10000);
+  const BestHypothesis direct = MakeCpuPoseKernel()->Score(one.calls[0].s, fx.View(), fx.params, table, 10000);
+  EXPECT_EQ(b1.index, direct.index);
+  EXPECT_EQ(b1.score, direct.score);
+  // More rounds than hypotheses: refused, naming both.
+  RecordingPoseKernel none;
+  EXPECT_THROW(ScoreInRounds(none, fx.sampling, sq, st, fx.View(), fx.params, table, 2, 3, 0.35), std::invalid_argument);
+  EXPECT_TRUE(none.calls.empty());
 }
 
 }  // namespace
