@@ -281,18 +281,22 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   }
 }
 
+geometry::PnpOptions System::TrackerPnpOptions(int min_inliers) const {
+  geometry::PnpOptions po;
+  po.focal_px = focal_px_;
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = min_inliers;
+  return po;
+}
+
 std::optional<Pose> System::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const {
   std::vector<Eigen::Vector3d> P;
   std::vector<Eigen::Vector2d> uv;
   for (const FeatureUndistorted& o : map_.frames[slot].features)
     if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
       P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
-  geometry::PnpOptions po;
-  po.focal_px = focal_px_;
-  po.threshold_px = options_.tracker.inlier_threshold_px;
-  po.min_inliers = min_inliers;
   int inliers = 0;
-  std::optional<Pose> pose = geometry::SolvePnp(P, uv, po, &inliers);
+  std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &inliers);
   if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
   return pose;
 }
@@ -684,7 +688,7 @@ void System::PruneHistory(int slot) {
   // The initialisation and the settling work on every frame since the reference (or the first frame posed
   // before it).
   if ((!initialised_ || settling_) && reference_slot_ >= 0)
-    keep_from = std::min(keep_from, posed_from_ >= 0 ? std::min(posed_from_, reference_slot_) : reference_slot_);
+    keep_from = std::min(keep_from, posed_from_ >= 0 ? posed_from_ : reference_slot_);  // posed_from_ <= reference
   for (; pruned_until_ < keep_from; ++pruned_until_) {
     std::vector<FeatureUndistorted>().swap(map_.frames[static_cast<size_t>(pruned_until_)].features);
   }
@@ -714,10 +718,7 @@ std::optional<Relocalisation> System::Relocalise(const std::vector<Relocalisatio
     ids.push_back(m.point_id);
   }
   if (static_cast<int>(P.size()) < options_.relocalise_min_inliers) return std::nullopt;
-  geometry::PnpOptions po;
-  po.focal_px = focal_px_;
-  po.threshold_px = options_.tracker.inlier_threshold_px;
-  po.min_inliers = options_.relocalise_min_inliers;
+  geometry::PnpOptions po = TrackerPnpOptions(options_.relocalise_min_inliers);
   po.iterations = 500;  // no prior and maybe half the matches wrong
   const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
   if (!pose) return std::nullopt;
@@ -746,11 +747,7 @@ PoseEstimate System::EstimatePosePnp(const std::vector<PointObservation>& obs, s
   // compares the inliers with these; counting every observed point made PnP stop making keyframes).
   est.scored = static_cast<int>(
       std::count_if(obs.begin(), obs.end(), [](const PointObservation& o) { return o.was_inlier; }));
-  geometry::PnpOptions po;
-  po.focal_px = focal_px_;
-  po.threshold_px = options_.tracker.inlier_threshold_px;
-  po.min_inliers = options_.tracker.min_inliers;
-  const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+  const std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(options_.tracker.min_inliers));
   res->assign(obs.size(), std::numeric_limits<double>::infinity());
   inl->assign(obs.size(), 0);
   if (!pose) {

@@ -12,6 +12,7 @@
 #include "compute/pose_kernel.h"
 #include "core/camera.h"
 #include "geometry/bundle_adjust.h"
+#include "geometry/pnp.h"
 #include "geometry/two_view.h"
 #include "slam/map.h"
 #include "slam/pose_smoother.h"
@@ -193,6 +194,8 @@ class System {
   // first_slot) while each can be; the ones placed get poses. Returns the first slot placed (before_slot:
   // none).
   int PoseFramesBefore(int before_slot, int first_slot);
+  // RANSAC PnP as the pose step judges a point: its inlier threshold, this many inliers at least.
+  geometry::PnpOptions TrackerPnpOptions(int min_inliers) const;
   std::optional<Pose> PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const;
   FrameReport TrackFrame(int slot, const std::optional<Pose>& pose_hint);
   int TriangulateNewPoints(int slot, int inliers);
