@@ -33,7 +33,7 @@ run kitti06 kitti_odometry_06_frames000-050 --anchor-mismatch reanchor "$@"
 mkdir -p "$OUT"
 echo "525 525 320 240" > "$OUT/7scenes_camera.txt"
 # New points from 8 degrees of parallax; every point of the adjustment's window with a residual above 1 px
-# re-sampled (the hand-held tracks' median residual is 1.2-1.4 px: at the paper's 2.5 px most points are never
+# re-sampled (the hand-held tracks' median residual is about 1.2 px: at the paper's 2.5 px most points are never
 # refined, and the map's scale drifts with the depth errors they were born with).
 run 7scenes_redkitchen 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --min-parallax-deg 8 --anchor-every 0 --candidate-px 1 "$@"
 run 7scenes_redkitchen_default 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --anchor-every 0 "$@"
