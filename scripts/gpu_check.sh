@@ -4,8 +4,9 @@
 # Writes everything to OUT_DIR/gpu_check.log (default $OUT, else /tmp/gpu_check); about 3-5 minutes.
 #   1. the CUDA tests (test_compute Cuda*: host-side checks and CPU/CUDA equivalence, a whole run included),
 #   2. `mcslam bench pose --compare` at 2^18 hypotheses x 50 / 200 / 1000 points, once as the paper samples (one
-#      round) and once as `mcslam run` does (3 rounds), and `bench points --compare` (evaluations per second;
-#      per-frame / per-call latency including the transfers),
+#      round) and once as `mcslam run` does (3 rounds), and `bench points --compare` on one keyframe's
+#      adjustment and on successive keyframes' (evaluations per second; per-frame / per-call latency including
+#      the transfers; bytes sent per call),
 #   3. the paper's noisy synthetic scenario run end to end on each backend, three times each (wall and CPU time).
 set -uo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
@@ -43,6 +44,7 @@ echo "== pose kernel (2^18 hypotheses), point kernel"
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31 --rounds 3
 step mcslam bench points --compare --repeats 31
+step mcslam bench points --compare --repeats 31 --successive
 
 echo "== whole synthetic run (paper scenario, 1 px noise, 10 % outliers), 3 times on each backend"
 step mcslam synth --out "$W/synth" --noise 1 --outliers 0.1

@@ -15,6 +15,7 @@
 #include "core/median.h"
 #include "apps/known_map_job.h"
 #include "apps/options.h"
+#include "compute/cuda/cuda_kernels.h"
 #include "compute/pose_fixture.h"
 #include "slam/system.h"
 #include "eval/trajectory_eval.h"
@@ -135,31 +136,59 @@ void BenchPose(const PoseBenchArgs& a) {
 }
 
 // The point-adjustment kernel (Algorithm 2) on the shape of one keyframe's adjustment: every point seen by
-// every keyframe of the window, the System's samples per point and window size by default.
+// every keyframe of the window, the System's samples per point and window size by default. --successive:
+// the adjustments of successive keyframes instead, as a run makes them (compute::KeyframeWindowFixture, every
+// view): each call's window one keyframe on, a tenth of its points new, and keyframe and point ids given as
+// the System gives them, so that a device backend sends only what it does not hold yet.
 struct PointBenchArgs : BenchBackends {
   std::vector<int> points{400};
   int samples = slam::MappingOptions{}.samples;
   int window = slam::MappingOptions{}.window;
   int repeats = 15;
+  bool successive = false;
 };
+
+// Bytes a CUDA kernel has sent so far (the normal table's excepted); -1 for another backend.
+long BytesSent(const compute::PointKernel& kernel) {
+#ifdef MCSLAM_WITH_CUDA
+  if (kernel.kind() == compute::BackendKind::kCuda) return compute::cuda::StatsOf(kernel).bytes_uploaded;
+#endif
+  (void)kernel;
+  return -1;
+}
 
 void BenchPoints(const PointBenchArgs& a) {
   const auto kernels = MakeBenchKernels<compute::PointKernel>(a, MakePointKernelFor);
   const compute::NormalTable table(a.samples, 1);
   for (int np : a.points) {
-    const compute::PointFixture fx(np, a.window, compute::PointFixture::Views::kAll);
-    const compute::PointAdjustProblem pr = fx.Problem();
-    const double evals = double(a.samples) * fx.observations();
+    // The problems of the calls in turn: one (the same every call), or one per call (the warm-up's first).
+    std::vector<compute::KeyframeWindowFixture> successive;
+    if (a.successive)
+      for (int c = 0; c <= a.repeats; ++c)
+        successive.emplace_back(c, a.window, np, std::max(1, np / 10), /*seed=*/5, /*every_view=*/true);
+    const compute::PointFixture fx(a.successive ? 0 : np, a.window, compute::PointFixture::Views::kAll);
+    const int observations = a.successive ? successive.back().observations() : fx.observations();
+    const double evals = double(a.samples) * observations;
     std::vector<std::pair<CallTimes, std::vector<compute::PointBest>>> runs;
     for (const auto& kernel : kernels) {
       std::vector<compute::PointBest> best(np);
-      const CallTimes t = TimeCalls(a.repeats, [&] { kernel->Score(pr, table, a.samples, best.data()); });
+      size_t call = 0;
+      long bytes_timed = 0;  // bytes sent before the first timed call (after the warm-up)
+      const CallTimes t = TimeCalls(a.repeats, [&] {
+        if (call == 1) bytes_timed = BytesSent(*kernel);
+        const compute::PointAdjustProblem pr = a.successive ? successive[call].Problem() : fx.Problem();
+        ++call;
+        kernel->Score(pr, table, a.samples, best.data());
+      });
       for (const compute::PointBest& b : best)
         if (b.index < 0) throw std::runtime_error("bench: kernel returned no sample for a point");
-      fmt::print("bench points backend={} {} points={} keyframes={} observations={} samples={} repeats={} "
-                 "call_ms_median={:.3f} call_ms_min={:.3f} evals_per_s={:.4g}\n",
-                 BackendName(kernel->kind()), Where(kernel->kind()), np, a.window, fx.observations(), a.samples,
-                 a.repeats, t.median_ms, t.min_ms, evals / (t.median_ms * 1e-3));
+      const long bytes = BytesSent(*kernel);
+      fmt::print("bench points backend={} {} points={} keyframes={} observations={} samples={} {}repeats={} "
+                 "call_ms_median={:.3f} call_ms_min={:.3f} evals_per_s={:.4g}{}\n",
+                 BackendName(kernel->kind()), Where(kernel->kind()), np, a.window, observations, a.samples,
+                 a.successive ? "calls=successive " : "", a.repeats, t.median_ms, t.min_ms,
+                 evals / (t.median_ms * 1e-3),
+                 bytes < 0 ? std::string() : fmt::format(" bytes_sent_per_call={}", (bytes - bytes_timed) / a.repeats));
       runs.emplace_back(t, std::move(best));
     }
     for (size_t i = 1; i < runs.size(); ++i) {
@@ -246,6 +275,10 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   points->add_option("--repeats", qa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
+  points->add_flag("--successive", qa->successive,
+                   "Time successive keyframes' adjustments, as a run makes them (the window one keyframe on and a "
+                   "tenth of the points new each call, with the ids that let a GPU keep keyframes and features), "
+                   "instead of one adjustment repeated");
   AddBenchBackendFlags(points, qa.get());
   points->callback([qa] { BenchPoints(*qa); });
 

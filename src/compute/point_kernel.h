@@ -2,6 +2,7 @@
 // The compute layer's point interface (paper §6.2-6.3, Algorithm 2): for every map point to adjust, score
 // random samples around it by their summed reprojection distance over a set of keyframes and return the
 // best sample of each point. One implementation per backend.
+#include <cstdint>
 #include <memory>
 
 #include "compute/backend.h"
@@ -28,6 +29,14 @@ struct PointAdjustProblem {
   const float* obs_u = nullptr;
   const float* obs_v = nullptr;
   PoseScoringParams params;  // fx, fy, cap per observation, min depth
+  // Optional identities, both or neither: a stable id per keyframe pose (num_poses; the frame index) and per
+  // point (num_points; the map point id). With them a device backend keeps keyframe poses and feature
+  // positions on the device across calls and sends only what it does not hold yet (a keyframe id's pose, a
+  // (keyframe id, point id)'s feature, compared by value: a moved pose is sent again). Within one call the
+  // keyframe ids, and the (keyframe id, point id) pairs of the observations, must be distinct. The CPU
+  // backend does not need them.
+  const int64_t* pose_ids = nullptr;
+  const int64_t* point_ids = nullptr;
 };
 
 struct PointBest {

@@ -1,8 +1,10 @@
 #pragma once
 // Synthetic scoring problems for benchmarks and backend-equivalence tests. PoseFixture: `count` points on a
 // 1 m object about 3 m in front of an identity camera (the paper's set-up), features at their exact
-// projections. PointFixture (below): points seen by keyframes on an arc.
+// projections. PointFixture (below): points seen by keyframes on an arc. KeyframeWindowFixture: the point
+// adjustments of successive keyframes, their windows and points overlapping as in a run.
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "compute/point_kernel.h"
@@ -60,6 +62,20 @@ struct ArcCameras {
   }
 };
 
+// A view of a fixture's arrays (poses, cx .. sz, begin, pose_idx, ou, ov, params) as a PointAdjustProblem.
+template <typename Fixture>
+PointAdjustProblem PointProblemOf(const Fixture& f) {
+  PointAdjustProblem pr;
+  pr.poses = f.poses.data();
+  pr.num_poses = static_cast<int>(f.poses.size());
+  pr.cx = f.cx.data(), pr.cy = f.cy.data(), pr.cz = f.cz.data(), pr.sx = f.sx.data(), pr.sy = f.sy.data(), pr.sz = f.sz.data();
+  pr.obs_begin = f.begin.data();
+  pr.num_points = static_cast<int>(f.cx.size());
+  pr.obs_pose = f.pose_idx.data(), pr.obs_u = f.ou.data(), pr.obs_v = f.ov.data();
+  pr.params = f.params;
+  return pr;
+}
+
 // A point-adjustment problem on the ArcCameras: `num_points` points within 0.3 m of the origin, each centre a
 // few cm off the truth (spread 3, 3, 5 cm) and its observations up to 1.5 px off the exact projections.
 // Point p is seen by the first views(p) cameras: all of them (kAll: the shape of a point adjustment over a
@@ -92,15 +108,64 @@ struct PointFixture : ArcCameras {
     }
   }
   int observations() const { return begin.back() - begin.front(); }
-  PointAdjustProblem Problem() const {
-    PointAdjustProblem pr;
-    pr.poses = poses.data();
-    pr.num_poses = static_cast<int>(poses.size());
-    pr.cx = cx.data(), pr.cy = cy.data(), pr.cz = cz.data(), pr.sx = sx.data(), pr.sy = sy.data(), pr.sz = sz.data();
-    pr.obs_begin = begin.data();
-    pr.num_points = static_cast<int>(cx.size());
-    pr.obs_pose = pose_idx.data(), pr.obs_u = ou.data(), pr.obs_v = ov.data();
-    pr.params = params;
+  PointAdjustProblem Problem() const { return PointProblemOf(*this); }
+};
+
+// The point adjustment of the call-th of successive keyframes, as the System runs them (a device backend keeps
+// their keyframes and features, compute/cuda/point_residency.h): the window is keyframes call .. call +
+// window - 1 (keyframe k 3 m from the origin, turned by 0.01 k rad about y), the points are ids call * shift
+// .. call * shift + num_points - 1 (point j within 0.3 m of the origin, seen by the window's keyframes k with
+// (j + k) % 4 != 0, or by all of them with every_view). A keyframe's pose and a (keyframe, point) feature (exact projection, up to 1.5 px off)
+// are the same in every call that has them; the centres (a few cm off the truth) are the call's own.
+struct KeyframeWindowFixture {
+  std::vector<ScaledPose> poses;
+  std::vector<int64_t> pose_ids, point_ids;
+  std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
+  std::vector<int> begin{0}, pose_idx;
+  PoseScoringParams params;
+
+  explicit KeyframeWindowFixture(int call, int window = 8, int num_points = 300, int shift = 20, uint64_t seed = 5,
+                                 bool every_view = false) {
+    params.fx = params.fy = 500.0f;
+    params.max_distance_px = 50.0f;
+    for (int w = 0; w < window; ++w) {
+      const int64_t k = call + w;
+      const float a = 0.01f * static_cast<float>(k);
+      const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
+      const float t[3] = {0.0f, 0.0f, 3.0f};
+      poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
+      pose_ids.push_back(k);
+    }
+    CounterRng centre_rng(seed, 1 + static_cast<uint32_t>(call));
+    for (int i = 0; i < num_points; ++i) {
+      const int64_t j = static_cast<int64_t>(call) * shift + i;
+      CounterRng point_rng(seed, 100000 + static_cast<uint32_t>(j));
+      float X[3];
+      for (float& x : X) x = static_cast<float>(point_rng.Uniform(-0.3, 0.3));
+      cx.push_back(X[0] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
+      cy.push_back(X[1] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
+      cz.push_back(X[2] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
+      sx.push_back(0.03f), sy.push_back(0.03f), sz.push_back(0.05f);
+      for (int w = 0; w < window; ++w) {
+        const int64_t k = pose_ids[static_cast<size_t>(w)];
+        if (!every_view && (j + k) % 4 == 0) continue;
+        CounterRng feature_rng(seed ^ (static_cast<uint64_t>(k) << 20), static_cast<uint32_t>(j));
+        const ScaledPose& p = poses[static_cast<size_t>(w)];
+        const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
+        const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
+        const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
+        pose_idx.push_back(w);
+        ou.push_back(x / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+        ov.push_back(y / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+      }
+      begin.push_back(static_cast<int>(pose_idx.size()));
+      point_ids.push_back(j);
+    }
+  }
+  int observations() const { return begin.back() - begin.front(); }
+  PointAdjustProblem Problem(bool with_ids = true) const {
+    PointAdjustProblem pr = PointProblemOf(*this);
+    if (with_ids) pr.pose_ids = pose_ids.data(), pr.point_ids = point_ids.data();
     return pr;
   }
 };

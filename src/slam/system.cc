@@ -807,9 +807,11 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   const FrameRecord& cur = map_.frames[slot];
   std::vector<int> window;  // frame slots
   std::vector<compute::ScaledPose> poses;
+  std::vector<int64_t> pose_ids;  // frame indices: a device backend keeps the poses and features by them
   for (int ws : WindowSlots()) {
     const FrameRecord& k = map_.frames[ws];
     window.push_back(ws);
+    pose_ids.push_back(k.index);
     const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
     const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
     const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};
@@ -835,6 +837,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   std::vector<std::vector<std::pair<int, Eigen::Vector2d>>> cand_views;
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
   std::vector<int> obs_begin{0}, obs_pose;
+  std::vector<int64_t> point_ids;
   std::vector<std::pair<int, Eigen::Vector2d>> views;
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* p = map_.Find(f.id);
@@ -875,6 +878,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
       ov.push_back(float(uv_obs.y() - camera_.cy));
     }
     cand.push_back(p);
+    point_ids.push_back(p->id);
     before_residual.push_back(before);
     cand_views.push_back(views);
     cx.push_back(float(p->position_in_world.x())), cy.push_back(float(p->position_in_world.y()));
@@ -895,6 +899,8 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   pr.obs_u = ou.data(), pr.obs_v = ov.data();
   pr.params.fx = float(camera_.fx), pr.params.fy = float(camera_.fy);
   pr.params.max_distance_px = float(mo.max_distance_px);
+  pr.pose_ids = pose_ids.data();
+  pr.point_ids = point_ids.data();
   std::vector<compute::PointBest> best(cand.size());
   point_kernel_->Score(pr, point_normals_, mo.samples, best.data());
 

@@ -279,6 +279,22 @@ TEST(CliBench, PointsPrintsLatencyAndEvaluationsPerSecond) {
   EXPECT_NE(bad.output.find("--window"), std::string::npos) << bad.output;
 }
 
+TEST(CliBench, PointsSuccessiveTimesKeyframesInTurn) {
+  // Successive keyframes' adjustments (--successive): the same shape per call (every point seen by every
+  // keyframe), said on the line; the CPU backend sends nothing, so no bytes field.
+  const auto r = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 3 --successive");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("points=40 keyframes=5 observations=200 samples=512 calls=successive repeats=3 "),
+            std::string::npos)
+      << r.output;
+  EXPECT_GT(Field(r.output, "evals_per_s"), 1e6) << r.output;
+  EXPECT_EQ(r.output.find("bytes_sent_per_call"), std::string::npos) << r.output;
+  // Without the flag the calls are one adjustment repeated, and the line does not say otherwise.
+  const auto same = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 1");
+  ASSERT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_EQ(same.output.find("calls="), std::string::npos) << same.output;
+}
+
 TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {
   for (const std::string cmd : {"bench pose --hypotheses 1024 --backend cuda", "bench pose --hypotheses 1024 --compare",
                                 "bench points --points 10 --backend cuda", "bench points --points 10 --compare"}) {

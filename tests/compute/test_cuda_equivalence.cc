@@ -11,6 +11,8 @@
 #include <limits>
 #include <memory>
 #include <random>
+#include <set>
+#include <utility>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -20,7 +22,9 @@
 #include "compute/backend.h"
 #include "compute/cuda/candidate.h"
 #include "compute/cuda/cuda_kernels.h"
+#include "compute/cuda/point_residency.h"
 #include "compute/cuda/point_staging.h"
+#include "compute/cuda/slot_mirror.h"
 #include "compute/cuda/pose_staging.h"
 #include "compute/cuda/table_key.h"
 #include "compute/point_kernel.h"
@@ -261,6 +265,202 @@ TEST(CudaHost, PointStagingRebasesAndRejectsWhatWouldReadOutOfBounds) {
   null_obs.obs_u = nullptr;
   throws_saying(null_obs, "observation array");
   EXPECT_EQ(cuda::PlanPointStaging(PointAdjustProblem{}).bytes, 0u);  // no points: nothing to stage
+}
+
+// The record of a device-resident store: a value is sent when its key is new, when it changed (by one ulp),
+// and when the device copy was lost (the store grew, or Invalidate after a failed call); otherwise never.
+TEST(CudaHost, SlotMirrorSendsAValueOnlyWhenTheDeviceDoesNotHoldIt) {
+  cuda::SlotMirror<int64_t, float> m(/*min_capacity=*/4, /*keep_calls=*/2);
+  const auto call = [&m](const std::vector<std::pair<int64_t, float>>& kv, std::vector<int>* slots) {
+    m.BeginCall();
+    for (const auto& [k, v] : kv) m.Touch(k);
+    m.MakeRoom();
+    std::vector<bool> sent;
+    slots->clear();
+    for (const auto& [k, v] : kv) {
+      bool send = false;
+      slots->push_back(m.Acquire(k, v, &send));
+      sent.push_back(send);
+    }
+    return sent;
+  };
+  std::vector<int> s1, s2;
+  EXPECT_EQ(call({{10, 1.0f}, {11, 2.0f}, {12, 3.0f}}, &s1), std::vector<bool>({true, true, true}));
+  EXPECT_EQ(m.capacity(), 4u);
+  EXPECT_EQ(std::set<int>(s1.begin(), s1.end()).size(), 3u);  // distinct slots
+  for (int s : s1) EXPECT_LT(s, 4);
+  EXPECT_EQ(call({{12, 3.0f}, {10, 1.0f}, {11, 2.0f}}, &s2), std::vector<bool>({false, false, false}));
+  EXPECT_EQ(s2, (std::vector<int>{s1[2], s1[0], s1[1]}));  // a key keeps its slot
+  // One ulp of one value.
+  EXPECT_EQ(call({{10, 1.0f}, {11, std::nextafter(2.0f, 3.0f)}}, &s2), std::vector<bool>({false, true}));
+  // Lost device copy: everything asked for is sent again, in the same slots.
+  const uint64_t g = m.generation();
+  m.Invalidate();
+  EXPECT_NE(m.generation(), g);
+  EXPECT_EQ(call({{10, 1.0f}, {12, 3.0f}}, &s2), std::vector<bool>({true, true}));
+  EXPECT_EQ(s2, (std::vector<int>{s1[0], s1[2]}));
+  // 11 was last asked for two calls ago (keep_calls = 2): its slot goes to a new key when room is needed.
+  EXPECT_EQ(call({{10, 1.0f}, {12, 3.0f}, {13, 4.0f}, {14, 5.0f}}, &s2), std::vector<bool>({false, false, true, true}));
+  EXPECT_EQ(m.capacity(), 4u);
+  EXPECT_EQ(m.live(), 4u);
+  EXPECT_TRUE(std::find(s2.begin(), s2.end(), s1[1]) != s2.end());
+  // More keys than slots: the store grows, so the device array is new and every key of the call is sent.
+  const uint64_t before_growth = m.generation();
+  EXPECT_EQ(call({{10, 1.0f}, {12, 3.0f}, {13, 4.0f}, {14, 5.0f}, {15, 6.0f}}, &s2),
+            std::vector<bool>({true, true, true, true, true}));
+  EXPECT_GE(m.capacity(), 5u);
+  EXPECT_NE(m.generation(), before_growth);
+  for (int s : s2) EXPECT_LT(static_cast<size_t>(s), m.capacity());
+  // A key asked for twice in one call is refused; one nobody touched before MakeRoom is a caller's bug.
+  m.BeginCall();
+  m.Touch(10);
+  m.MakeRoom();
+  bool send = false;
+  m.Acquire(10, 1.0f, &send);
+  EXPECT_THROW(m.Acquire(10, 1.0f, &send), std::invalid_argument);
+  cuda::SlotMirror<int64_t, float> tight(1, 1);
+  tight.BeginCall();
+  tight.Touch(1);
+  tight.MakeRoom();
+  tight.Acquire(1, 0.0f, &send);
+  EXPECT_THROW(tight.Acquire(2, 0.0f, &send), std::logic_error);
+}
+
+// The device side of resident point calls, run on the host with the very functions the kernels call
+// (ApplyResidentUpdate, ResidentObservations): stores that are reallocated full of garbage whenever the record
+// wants more slots than they have (as DeviceBuffer::Reserve loses its contents), the staged updates applied,
+// then every observation of the call read back through the stores.
+struct SimulatedResidentDevice {
+  std::vector<ScaledPose> poses;
+  std::vector<cuda::FeatureEntry> features;
+
+  // Runs one planned call (its staged bytes) and checks that each observation reads back as the problem has it.
+  void RunAndCheck(const cuda::PointResidency& res, const PointAdjustProblem& pr, const std::vector<unsigned char>& buf,
+                   const std::string& what) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    if (res.pose_capacity() > poses.size()) {
+      ScaledPose garbage;
+      std::fill(std::begin(garbage.r), std::end(garbage.r), nan);
+      std::fill(std::begin(garbage.t), std::end(garbage.t), nan);
+      poses.assign(res.pose_capacity(), garbage);
+    }
+    if (res.feature_capacity() > features.size()) features.assign(res.feature_capacity(), cuda::FeatureEntry{-1, nan, nan});
+    const cuda::ResidentPointLayout& l = res.layout();
+    const auto* pu = reinterpret_cast<const cuda::PoseUpdate*>(buf.data() + l.pose_updates);
+    const auto* fu = reinterpret_cast<const cuda::FeatureUpdate*>(buf.data() + l.feature_updates);
+    for (int i = 0; i < l.num_pose_updates + l.num_feature_updates; ++i)
+      cuda::ApplyResidentUpdate(i, pu, l.num_pose_updates, fu, l.num_feature_updates, poses.data(), features.data());
+    const int* obs_feature = reinterpret_cast<const int*>(buf.data() + l.obs_feature);
+    const int* begin = reinterpret_cast<const int*>(buf.data() + l.obs_begin);
+    const cuda::ResidentObservations obs{poses.data(), features.data(), obs_feature};
+    ASSERT_EQ(l.num_points, pr.num_points) << what;
+    for (int p = 0; p < pr.num_points; ++p) {
+      ASSERT_EQ(begin[p + 1] - begin[p], pr.obs_begin[p + 1] - pr.obs_begin[p]) << what << ", point " << p;
+      const float* centre = reinterpret_cast<const float*>(buf.data() + l.centres);
+      EXPECT_EQ(centre[p], pr.cx[p]) << what;
+      EXPECT_EQ(centre[5 * pr.num_points + p], pr.sz[p]) << what;
+      for (int i = 0; i < begin[p + 1] - begin[p]; ++i) {
+        const int o = begin[p] + i, given = pr.obs_begin[p] + i;
+        ASSERT_GE(obs_feature[o], 0) << what;
+        ASSERT_LT(static_cast<size_t>(obs_feature[o]), features.size()) << what;
+        const int pose_slot = features[static_cast<size_t>(obs_feature[o])].pose_slot;
+        ASSERT_GE(pose_slot, 0) << what << ", point " << p << ": a feature the device does not hold";
+        ASSERT_LT(static_cast<size_t>(pose_slot), poses.size()) << what;
+        EXPECT_EQ(std::memcmp(&obs.Pose(o), &pr.poses[pr.obs_pose[given]], sizeof(ScaledPose)), 0)
+            << what << ", point " << p << ", observation " << i << ": another keyframe's pose";
+        EXPECT_EQ(obs.U(o), pr.obs_u[given]) << what << ", point " << p;
+        EXPECT_EQ(obs.V(o), pr.obs_v[given]) << what << ", point " << p;
+      }
+    }
+  }
+};
+
+// One resident call on the host: plan, stage, run on the simulated device. Returns the layout.
+cuda::ResidentPointLayout ResidentCall(cuda::PointResidency& res, SimulatedResidentDevice& dev,
+                                       const PointAdjustProblem& pr, const std::string& what) {
+  const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
+  EXPECT_TRUE(cuda::PointResidency::Wanted(pr));
+  const cuda::ResidentPointLayout l = res.Plan(pr, checked);
+  for (size_t off : {l.centres, l.obs_begin, l.obs_feature, l.pose_updates, l.feature_updates, l.bytes})
+    EXPECT_EQ(off % 256, 0u) << what;
+  std::vector<unsigned char> buf(l.bytes);
+  res.Write(pr, checked, buf.data());
+  dev.RunAndCheck(res, pr, buf, what);
+  return l;
+}
+
+// The (keyframe id, point id) pairs of a problem's observations.
+std::set<std::pair<int64_t, int64_t>> FeatureKeys(const KeyframeWindowFixture& f) {
+  std::set<std::pair<int64_t, int64_t>> keys;
+  for (size_t p = 0; p < f.point_ids.size(); ++p)
+    for (int o = f.begin[p]; o < f.begin[p + 1]; ++o) keys.insert({f.pose_ids[static_cast<size_t>(f.pose_idx[o])], f.point_ids[p]});
+  return keys;
+}
+
+// Successive keyframes' point adjustments with ids (what the System gives): every observation reads back from
+// the device-resident stores as given, through growth and reuse of slots, and a call sends exactly the poses
+// and features the call before did not have.
+TEST(CudaHost, ResidentPointCallsSendOnlyWhatTheDeviceDoesNotHoldAndReadBackAsGiven) {
+  // Small stores that must grow and reuse slots: 64 feature slots to start, keys kept for 3 calls.
+  cuda::PointResidency res(/*min_capacity=*/64, /*keep_calls=*/3);
+  SimulatedResidentDevice dev;
+  int steady_calls = 0;
+  for (int c = 0; c < 14; ++c) {
+    const KeyframeWindowFixture f(c, /*window=*/8, /*num_points=*/60, /*shift=*/10);
+    const uint64_t pose_generation = res.pose_generation(), feature_generation = res.feature_generation();
+    const std::string what = "call " + std::to_string(c);
+    const cuda::ResidentPointLayout l = ResidentCall(res, dev, f.Problem(), what);
+    // The first call, or a store that grew (a new device array): all of that store's entries are sent.
+    const bool poses_lost = c == 0 || res.pose_generation() != pose_generation;
+    const bool features_lost = c == 0 || res.feature_generation() != feature_generation;
+    EXPECT_EQ(l.num_pose_updates, poses_lost ? 8 : 1) << what << ": only the new keyframe";
+    if (features_lost) {
+      EXPECT_EQ(l.num_feature_updates, f.observations()) << what;
+      continue;
+    }
+    ++steady_calls;
+    const std::set<std::pair<int64_t, int64_t>> now = FeatureKeys(f), before = FeatureKeys(KeyframeWindowFixture(c - 1, 8, 60, 10));
+    int fresh = 0;
+    for (const auto& k : now) fresh += before.count(k) == 0;
+    EXPECT_EQ(l.num_feature_updates, fresh) << what;
+    EXPECT_LT(l.num_feature_updates, f.observations() / 2) << what;
+  }
+  EXPECT_GE(steady_calls, 8);  // growth is rare: the stores double
+  EXPECT_LT(res.live_features(), 4 * 8u * 60u);  // slots of keys unused for 3 calls were reused
+
+  // The same call again: nothing but the call's own centres, spreads and feature slots travels.
+  const KeyframeWindowFixture last(13, 8, 60, 10);
+  const cuda::ResidentPointLayout again = ResidentCall(res, dev, last.Problem(), "repeat");
+  EXPECT_EQ(again.num_pose_updates + again.num_feature_updates, 0);
+  EXPECT_LT(again.bytes, cuda::PlanPointStaging(last.Problem(false)).bytes);
+  // A keyframe a settling adjustment moved (one ulp of one entry): its pose alone is sent.
+  KeyframeWindowFixture moved = last;
+  moved.poses[3].t[2] = std::nextafter(moved.poses[3].t[2], 10.0f);
+  const cuda::ResidentPointLayout m = ResidentCall(res, dev, moved.Problem(), "moved keyframe");
+  EXPECT_EQ(m.num_pose_updates, 1);
+  EXPECT_EQ(m.num_feature_updates, 0);
+
+  // Ids that repeat within a call are refused naming them; the record is then invalid, so the next call
+  // sends all it needs and still reads back right.
+  KeyframeWindowFixture twice = last;
+  twice.pose_ids[2] = twice.pose_ids[1];
+  try {
+    ResidentCall(res, dev, twice.Problem(), "repeated keyframe id");
+    ADD_FAILURE() << "a repeated keyframe id was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("keyframe id 14 appears twice"), std::string::npos) << e.what();
+  }
+  const cuda::ResidentPointLayout after = ResidentCall(res, dev, last.Problem(), "after a refused call");
+  EXPECT_EQ(after.num_pose_updates, 8);
+  EXPECT_EQ(after.num_feature_updates, last.observations());
+  KeyframeWindowFixture same_point = last;
+  same_point.point_ids[5] = same_point.point_ids[4];
+  EXPECT_THROW(ResidentCall(res, dev, same_point.Problem(), "repeated point id"), std::invalid_argument);
+  // Ids are both given or neither.
+  PointAdjustProblem half = last.Problem();
+  half.point_ids = nullptr;
+  EXPECT_THROW(cuda::PointResidency::Wanted(half), std::invalid_argument);
+  EXPECT_FALSE(cuda::PointResidency::Wanted(last.Problem(false)));
 }
 
 TEST(CudaHost, BackendSelectionIsExplicitAndNeverFallsBackSilently) {
@@ -572,6 +772,44 @@ TEST(CudaEquivalence, PointKernelReusesBuffersAndFollowsTableChanges) {
   table.Fill(3, 0, 7);
   ExpectPointEquivalent(*gpu, sc, table, 4096, "refilled table");
   EXPECT_EQ(Stats(*gpu).table_uploads, 2);
+}
+
+// With ids (what the System gives) the point kernel keeps keyframe poses and features on the device. Over
+// successive keyframes' adjustments it picks the very samples, with the very scores, that it picks when each
+// call's whole problem is sent (the same floats, summed in the same order), agrees with the CPU within
+// tolerance, and sends fewer bytes.
+TEST(CudaEquivalence, PointKernelWithIdsKeepsKeyframesOnTheDeviceAndScoresAsWithout) {
+  REQUIRE_CUDA_DEVICE();
+  auto resident = CudaPoint(), direct = CudaPoint(), cpu = MakeCpuPointKernel();
+  const NormalTable table(4096, 3);
+  for (int c = 0; c < 12; ++c) {
+    const KeyframeWindowFixture f(c, /*window=*/12, /*num_points=*/300, /*shift=*/20);
+    const int n = static_cast<int>(f.point_ids.size());
+    std::vector<PointBest> a(n), b(n), ref(n);
+    resident->Score(f.Problem(), table, 4096, a.data());
+    direct->Score(f.Problem(false), table, 4096, b.data());
+    cpu->Score(f.Problem(), table, 4096, ref.data());
+    for (int p = 0; p < n; ++p) {
+      ASSERT_EQ(a[p].index, b[p].index) << "call " << c << ", point " << p;
+      ASSERT_EQ(a[p].score, b[p].score) << "call " << c << ", point " << p;
+      EXPECT_NEAR(a[p].score, ref[p].score, 2 * Tolerance(ref[p].score, f.begin[p + 1] - f.begin[p]))
+          << "call " << c << ", point " << p;
+    }
+  }
+  const cuda::CudaKernelStats rs = Stats(*resident), ds = Stats(*direct);
+  std::cout << "12 keyframes' adjustments (12-keyframe window, 300 points): " << rs.bytes_uploaded
+            << " bytes sent with ids, " << ds.bytes_uploaded << " without\n";
+  EXPECT_LT(rs.bytes_uploaded, ds.bytes_uploaded);
+  // A call with a repeated keyframe id is refused before anything reaches the device, and the next call is
+  // right again.
+  KeyframeWindowFixture twice(12, 12, 300, 20);
+  twice.pose_ids[2] = twice.pose_ids[1];
+  std::vector<PointBest> a(300), b(300);
+  EXPECT_THROW(resident->Score(twice.Problem(), table, 4096, a.data()), std::invalid_argument);
+  const KeyframeWindowFixture next(12, 12, 300, 20);
+  resident->Score(next.Problem(), table, 4096, a.data());
+  direct->Score(next.Problem(false), table, 4096, b.data());
+  for (int p = 0; p < 300; ++p) ASSERT_EQ(a[p].index, b[p].index) << "after a refused call, point " << p;
 }
 
 // ---- A whole synthetic SLAM run: CPU vs CUDA -------------------------------------------------------

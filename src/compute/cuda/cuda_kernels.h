@@ -11,6 +11,7 @@ struct CudaKernelStats {
   long calls = 0;               // Score calls that reached the device
   long table_uploads = 0;       // NormalTable copies to the device
   long point_uploads = 0;       // copies of the scoring points (pose kernel) or of the problem (point kernel)
+  long bytes_uploaded = 0;      // bytes of those copies (the normal table's not counted)
   long device_allocations = 0;  // cudaMalloc calls so far (the buffers only grow)
   long pinned_allocations = 0;  // cudaMallocHost calls so far
 };

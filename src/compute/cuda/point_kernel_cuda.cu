@@ -4,10 +4,14 @@
 // block reduction (ties to the lowest index). Only one (score, index) per point comes back; the host makes
 // the winning position from its row, as the CPU backend does.
 //
-// Memory: the normal table on the device, uploaded when it changes (device_normal_table.h). The problem
-// (keyframe poses as ScaledPose, centres and spreads, observations) is staged into one pinned buffer and
-// copied in one asynchronous copy (point_staging.h). All threads of a block read the same observation at
-// the same time, so the poses and features are read straight from global memory (a broadcast, L1-cached).
+// Memory: the normal table on the device, uploaded when it changes (device_normal_table.h). A problem that
+// carries keyframe and point ids (what the System gives) keeps its keyframe poses and feature positions on
+// the device across calls (point_residency.h): a call stages its centres and spreads, one feature slot per
+// observation and only the poses and features the device does not hold yet into one pinned buffer, copies
+// it in one asynchronous copy, and a small kernel puts the new entries into the stores before the scoring
+// kernel reads them. A problem without ids is staged whole (point_staging.h). All threads of a block read
+// the same observation at the same time, so the poses and features are read straight from global memory (a
+// broadcast, L1-cached).
 #include <cub/block/block_reduce.cuh>
 #include <cuda_runtime.h>
 
@@ -17,12 +21,14 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "compute/cuda/candidate.h"
 #include "compute/cuda/cuda_check.h"
 #include "compute/cuda/cuda_kernels.h"
 #include "compute/cuda/device_buffer.h"
 #include "compute/cuda/device_normal_table.h"
+#include "compute/cuda/point_residency.h"
 #include "compute/cuda/point_staging.h"
 #include "compute/point_kernel.h"
 #include "compute/pose_math.h"
@@ -35,13 +41,13 @@ namespace {
 constexpr int kPointBlock = 256;  // threads per point; the default 4096 samples are 16 per thread
 
 // Block p scores samples 0 .. samples-1 of point p; thread t takes samples t, t + kPointBlock, ... in
-// increasing order. centres: 6 columns of num_points floats (cx, cy, cz, sx, sy, sz).
+// increasing order. centres: 6 columns of num_points floats (cx, cy, cz, sx, sy, sz). Observations are read
+// through `obs` (point_residency.h: the call's own arrays, or the device-resident stores).
+template <typename Observations>
 __global__ void __launch_bounds__(kPointBlock)
-    ScorePointsKernel(const ScaledPose* __restrict__ poses, const float* __restrict__ centres, int num_points,
-                      const int* __restrict__ obs_begin, const int* __restrict__ obs_pose,
-                      const float* __restrict__ obs_u, const float* __restrict__ obs_v, const PoseScoringParams k,
-                      const float* __restrict__ normals, size_t normal_stride, int samples,
-                      Candidate* __restrict__ best_out) {
+    ScorePointsKernel(const Observations obs, const float* __restrict__ centres, int num_points,
+                      const int* __restrict__ obs_begin, const PoseScoringParams k, const float* __restrict__ normals,
+                      size_t normal_stride, int samples, Candidate* __restrict__ best_out) {
   using BlockReduce = cub::BlockReduce<Candidate, kPointBlock>;
   __shared__ typename BlockReduce::TempStorage reduce_storage;
 
@@ -60,8 +66,8 @@ __global__ void __launch_bounds__(kPointBlock)
     // Observations in order o0 .. o1-1 as on the CPU (same float sum).
     float acc = 0.0f;
     for (int o = o0; o < o1; ++o) {
-      const ScaledPose pose = poses[obs_pose[o]];
-      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(pose, z[0], z[1], z[2], obs_u[o], obs_v[o], k, cap);
+      const ScaledPose pose = obs.Pose(o);
+      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(pose, z[0], z[1], z[2], obs.U(o), obs.V(o), k, cap);
     }
     best = BestOf(best, Scored(acc, i));  // an infinite or NaN score is no candidate (candidate.h)
   }
@@ -69,14 +75,30 @@ __global__ void __launch_bounds__(kPointBlock)
   if (threadIdx.x == 0) best_out[p] = best;
 }
 
+// Puts a call's new poses and features into the device stores (one thread per update).
+constexpr int kUpdateBlock = 256;
+__global__ void __launch_bounds__(kUpdateBlock)
+    ApplyResidentUpdatesKernel(const PoseUpdate* __restrict__ pose_updates, int num_pose_updates,
+                               const FeatureUpdate* __restrict__ feature_updates, int num_feature_updates,
+                               ScaledPose* __restrict__ pose_store, FeatureEntry* __restrict__ feature_store) {
+  const int i = blockIdx.x * kUpdateBlock + static_cast<int>(threadIdx.x);
+  ApplyResidentUpdate(i, pose_updates, num_pose_updates, feature_updates, num_feature_updates, pose_store,
+                      feature_store);
+}
+
 struct PointResources {
   Stream stream;
   DeviceNormalTable table;
-  PinnedBuffer<unsigned char> host_problem;  // staged as point_staging.h plans it
+  PinnedBuffer<unsigned char> host_problem;  // staged as point_staging.h or point_residency.h plans it
   DeviceBuffer<unsigned char> problem;
   DeviceBuffer<Candidate> best;  // one per point
   PinnedBuffer<Candidate> host_best;
+  // The device-resident keyframe poses and features of problems with ids, and the host's record of them.
+  PointResidency residency;
+  DeviceBuffer<ScaledPose> pose_store;
+  DeviceBuffer<FeatureEntry> feature_store;
   long calls = 0;
+  long bytes_uploaded = 0;  // staged problems sent (the normal table not counted)
 };
 
 class CudaPointKernel final : public PointKernel {
@@ -112,6 +134,7 @@ class CudaPointKernel final : public PointKernel {
       return;
     }
     const PointStagingLayout layout = PlanPointStaging(pr);  // throws std::invalid_argument
+    const bool resident = PointResidency::Wanted(pr);         // likewise
 
     const std::lock_guard<std::mutex> call_lock(call_mutex_);  // one call at a time per kernel object
     ScopedDevice scoped(device_);
@@ -119,27 +142,57 @@ class CudaPointKernel final : public PointKernel {
     const cudaStream_t stream = r.stream.get();
     const float* d_normals = r.table.Sync(normals, stream);
 
-    unsigned char* h_problem = r.host_problem.Reserve(layout.bytes);
-    StagePointProblem(pr, layout, h_problem);
-    unsigned char* d_problem = r.problem.Reserve(layout.bytes);
     const size_t np = static_cast<size_t>(pr.num_points);
     Candidate* d_best = r.best.Reserve(np);
     Candidate* h_best = r.host_best.Reserve(np);
+    // With ids, the call's plan against the device-resident stores (throws std::invalid_argument, as above).
+    const ResidentPointLayout* rl = resident ? &r.residency.Plan(pr, layout) : nullptr;
     try {
-      MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, layout.bytes, cudaMemcpyHostToDevice, stream));
-      ScorePointsKernel<<<static_cast<unsigned>(pr.num_points), kPointBlock, 0, stream>>>(
-          reinterpret_cast<const ScaledPose*>(d_problem + layout.poses),
-          reinterpret_cast<const float*>(d_problem + layout.centres), pr.num_points,
-          reinterpret_cast<const int*>(d_problem + layout.obs_begin),
-          reinterpret_cast<const int*>(d_problem + layout.obs_pose),
-          reinterpret_cast<const float*>(d_problem + layout.obs_u),
-          reinterpret_cast<const float*>(d_problem + layout.obs_v), pr.params, d_normals, r.table.stride(), samples,
-          d_best);
-      MCSLAM_CUDA_CHECK_LAUNCH("ScorePointsKernel");
+      const size_t bytes = resident ? rl->bytes : layout.bytes;
+      unsigned char* h_problem = r.host_problem.Reserve(bytes);
+      if (resident) {
+        r.residency.Write(pr, layout, h_problem);
+      } else {
+        StagePointProblem(pr, layout, h_problem);
+      }
+      unsigned char* d_problem = r.problem.Reserve(bytes);
+      MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, bytes, cudaMemcpyHostToDevice, stream));
+      r.bytes_uploaded += static_cast<long>(bytes);
+      const auto score = [&](const auto& obs, size_t centres, size_t obs_begin, const char* name) {
+        using Observations = std::decay_t<decltype(obs)>;
+        ScorePointsKernel<Observations><<<static_cast<unsigned>(pr.num_points), kPointBlock, 0, stream>>>(
+            obs, reinterpret_cast<const float*>(d_problem + centres), pr.num_points,
+            reinterpret_cast<const int*>(d_problem + obs_begin), pr.params, d_normals, r.table.stride(), samples,
+            d_best);
+        MCSLAM_CUDA_CHECK_LAUNCH(name);
+      };
+      if (resident) {
+        // The stores only grow, and the record knows when they do (Plan grew it, and everything it asks for
+        // is sent again): a reallocation here loses nothing the record still counts on.
+        ScaledPose* d_poses = r.pose_store.Reserve(r.residency.pose_capacity());
+        FeatureEntry* d_features = r.feature_store.Reserve(r.residency.feature_capacity());
+        const int updates = rl->num_pose_updates + rl->num_feature_updates;
+        if (updates > 0) {
+          ApplyResidentUpdatesKernel<<<(updates + kUpdateBlock - 1) / kUpdateBlock, kUpdateBlock, 0, stream>>>(
+              reinterpret_cast<const PoseUpdate*>(d_problem + rl->pose_updates), rl->num_pose_updates,
+              reinterpret_cast<const FeatureUpdate*>(d_problem + rl->feature_updates), rl->num_feature_updates,
+              d_poses, d_features);
+          MCSLAM_CUDA_CHECK_LAUNCH("ApplyResidentUpdatesKernel");
+        }
+        score(ResidentObservations{d_poses, d_features, reinterpret_cast<const int*>(d_problem + rl->obs_feature)},
+              rl->centres, rl->obs_begin, "ScorePointsKernel<resident>");
+      } else {
+        score(DirectObservations{reinterpret_cast<const ScaledPose*>(d_problem + layout.poses),
+                                 reinterpret_cast<const int*>(d_problem + layout.obs_pose),
+                                 reinterpret_cast<const float*>(d_problem + layout.obs_u),
+                                 reinterpret_cast<const float*>(d_problem + layout.obs_v)},
+              layout.centres, layout.obs_begin, "ScorePointsKernel<direct>");
+      }
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(h_best, d_best, sizeof(Candidate) * np, cudaMemcpyDeviceToHost, stream));
       r.stream.Synchronize();
     } catch (...) {
       cudaStreamSynchronize(stream);  // the pinned buffers are not reused while a copy may still read them
+      if (resident) r.residency.Invalidate();  // what this call meant to put on the device may not be there
       throw;
     }
     ++r.calls;
@@ -168,8 +221,10 @@ class CudaPointKernel final : public PointKernel {
     const PointResources& r = *res_;
     st.calls = r.calls;
     st.table_uploads = r.table.uploads();
-    st.point_uploads = r.calls;  // one copy of the whole problem per call
-    st.device_allocations = r.table.allocations() + r.problem.allocations() + r.best.allocations();
+    st.point_uploads = r.calls;  // one copy of the call's staged problem per call
+    st.bytes_uploaded = r.bytes_uploaded;
+    st.device_allocations = r.table.allocations() + r.problem.allocations() + r.best.allocations() +
+                            r.pose_store.allocations() + r.feature_store.allocations();
     st.pinned_allocations = r.host_problem.allocations() + r.host_best.allocations();
     return st;
   }

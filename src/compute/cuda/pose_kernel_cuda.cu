@@ -147,6 +147,7 @@ struct PoseResources {
   int staged_count = -1;               // points in host_points; -1: none staged
   PointsOnDevice on_device = PointsOnDevice::kNone;
   long point_uploads = 0;
+  long bytes_uploaded = 0;
   DeviceBuffer<float> points;          // the same, when they do not fit in constant memory
   DeviceBuffer<Candidate> block_best;  // one per block of the scoring kernel
   DeviceBuffer<Candidate> best;        // the winner
@@ -226,6 +227,7 @@ class CudaPoseKernel final : public PoseKernel {
           ConstantPointsOwner() = id_;
           MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
           ++r.point_uploads;
+          r.bytes_uploaded += static_cast<long>(point_bytes);
         }
         ScorePosesKernel<true><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), nullptr, np,
                                                                   count, d_scores, d_block_best);
@@ -237,6 +239,7 @@ class CudaPoseKernel final : public PoseKernel {
           r.on_device = PointsOnDevice::kNone;
           MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_points, staged, point_bytes, cudaMemcpyHostToDevice, stream));
           ++r.point_uploads;
+          r.bytes_uploaded += static_cast<long>(point_bytes);
         }
         ScorePosesKernel<false><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), d_points, np,
                                                                    count, d_scores, d_block_best);
@@ -283,6 +286,7 @@ class CudaPoseKernel final : public PoseKernel {
     st.calls = r.calls;
     st.table_uploads = r.table.uploads();
     st.point_uploads = r.point_uploads;
+    st.bytes_uploaded = r.bytes_uploaded;
     st.device_allocations = r.table.allocations() + r.points.allocations() + r.block_best.allocations() +
                             r.best.allocations() + r.scores.allocations();
     st.pinned_allocations = r.host_points.allocations() + r.host_best.allocations();
