@@ -115,8 +115,9 @@ struct PointFixture : ArcCameras {
 // their keyframes and features, compute/cuda/point_residency.h): the window is keyframes call .. call +
 // window - 1 (keyframe k 3 m from the origin, turned by 0.01 k rad about y), the points are ids call * shift
 // .. call * shift + num_points - 1 (point j within 0.3 m of the origin, seen by the window's keyframes k with
-// (j + k) % 4 != 0, or by all of them with every_view). A keyframe's pose and a (keyframe, point) feature (exact projection, up to 1.5 px off)
-// are the same in every call that has them; the centres (a few cm off the truth) are the call's own.
+// (j + k) % 4 != 0, or by all of them with every_view). A keyframe's pose and a (keyframe, point) feature
+// (exact projection, up to 1.5 px off) are the same in every call that has them; the centres (a few cm off
+// the truth) are the call's own.
 struct KeyframeWindowFixture {
   std::vector<ScaledPose> poses;
   std::vector<int64_t> pose_ids, point_ids;
@@ -125,20 +126,27 @@ struct KeyframeWindowFixture {
   PoseScoringParams params;
 
   explicit KeyframeWindowFixture(int call, int window = 8, int num_points = 300, int shift = 20, uint64_t seed = 5,
-                                 bool every_view = false) {
+                                 bool every_view = false)
+      : KeyframeWindowFixture(Consecutive(call, window), static_cast<int64_t>(call) * shift, num_points,
+                              1 + static_cast<uint32_t>(call), seed, every_view) {}
+
+  // Any window: keyframes `keyframe_ids` (distinct; a Fibonacci window has gaps), points first_point ..
+  // first_point + num_points - 1, the centres' offsets from stream centre_stream.
+  KeyframeWindowFixture(const std::vector<int64_t>& keyframe_ids, int64_t first_point, int num_points,
+                        uint32_t centre_stream, uint64_t seed = 5, bool every_view = false) {
     params.fx = params.fy = 500.0f;
     params.max_distance_px = 50.0f;
-    for (int w = 0; w < window; ++w) {
-      const int64_t k = call + w;
+    for (const int64_t k : keyframe_ids) {
       const float a = 0.01f * static_cast<float>(k);
       const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
       const float t[3] = {0.0f, 0.0f, 3.0f};
       poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
       pose_ids.push_back(k);
     }
-    CounterRng centre_rng(seed, 1 + static_cast<uint32_t>(call));
+    const int window = static_cast<int>(keyframe_ids.size());
+    CounterRng centre_rng(seed, centre_stream);
     for (int i = 0; i < num_points; ++i) {
-      const int64_t j = static_cast<int64_t>(call) * shift + i;
+      const int64_t j = first_point + i;
       CounterRng point_rng(seed, 100000 + static_cast<uint32_t>(j));
       float X[3];
       for (float& x : X) x = static_cast<float>(point_rng.Uniform(-0.3, 0.3));
@@ -167,6 +175,13 @@ struct KeyframeWindowFixture {
     PointAdjustProblem pr = PointProblemOf(*this);
     if (with_ids) pr.pose_ids = pose_ids.data(), pr.point_ids = point_ids.data();
     return pr;
+  }
+
+ private:
+  static std::vector<int64_t> Consecutive(int first, int count) {
+    std::vector<int64_t> ids;
+    for (int w = 0; w < count; ++w) ids.push_back(first + w);
+    return ids;
   }
 };
 

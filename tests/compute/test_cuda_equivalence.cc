@@ -337,6 +337,13 @@ struct SimulatedResidentDevice {
   // Runs one planned call (its staged bytes) and checks that each observation reads back as the problem has it.
   void RunAndCheck(const cuda::PointResidency& res, const PointAdjustProblem& pr, const std::vector<unsigned char>& buf,
                    const std::string& what) {
+    Apply(res, buf, res.layout().num_pose_updates + res.layout().num_feature_updates);
+    Check(res, pr, buf, what);
+  }
+
+  // The stores as the call needs them (reallocated, with garbage, when the record wants more slots), and the
+  // first `updates` of the call's updates applied (all of them, unless a failure is being simulated).
+  void Apply(const cuda::PointResidency& res, const std::vector<unsigned char>& buf, int updates) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
     if (res.pose_capacity() > poses.size()) {
       ScaledPose garbage;
@@ -348,8 +355,13 @@ struct SimulatedResidentDevice {
     const cuda::ResidentPointLayout& l = res.layout();
     const auto* pu = reinterpret_cast<const cuda::PoseUpdate*>(buf.data() + l.pose_updates);
     const auto* fu = reinterpret_cast<const cuda::FeatureUpdate*>(buf.data() + l.feature_updates);
-    for (int i = 0; i < l.num_pose_updates + l.num_feature_updates; ++i)
+    for (int i = 0; i < updates; ++i)
       cuda::ApplyResidentUpdate(i, pu, l.num_pose_updates, fu, l.num_feature_updates, poses.data(), features.data());
+  }
+
+  void Check(const cuda::PointResidency& res, const PointAdjustProblem& pr, const std::vector<unsigned char>& buf,
+             const std::string& what) const {
+    const cuda::ResidentPointLayout& l = res.layout();
     const int* obs_feature = reinterpret_cast<const int*>(buf.data() + l.obs_feature);
     const int* begin = reinterpret_cast<const int*>(buf.data() + l.obs_begin);
     const cuda::ResidentObservations obs{poses.data(), features.data(), obs_feature};
@@ -395,6 +407,37 @@ std::set<std::pair<int64_t, int64_t>> FeatureKeys(const KeyframeWindowFixture& f
   for (size_t p = 0; p < f.point_ids.size(); ++p)
     for (int o = f.begin[p]; o < f.begin[p + 1]; ++o) keys.insert({f.pose_ids[static_cast<size_t>(f.pose_idx[o])], f.point_ids[p]});
   return keys;
+}
+
+// Windows as the System chooses them (Fibonacci: keyframe i is in the windows of i, i+1, i+2, i+3, i+5, i+8,
+// ...), so keyframes leave and come back; keys kept for one call only, so a returning keyframe may get another
+// pose slot while its features are still held (they must be sent again: their entry names the pose slot); and
+// now and then a call that fails on the device after half of its updates (the record is invalidated, as the
+// kernel's error path does) and is then made again. Every observation of every successful call reads back as
+// given.
+TEST(CudaHost, ResidentPointCallsSurviveReturningKeyframesAndFailedCalls) {
+  cuda::PointResidency res(/*min_capacity=*/16, /*keep_calls=*/1);
+  SimulatedResidentDevice dev;
+  int failures = 0;
+  for (int c = 0; c < 60; ++c) {
+    std::vector<int64_t> ids;
+    for (int back : {0, 1, 2, 3, 5, 8, 13, 21, 34})
+      if (c - back >= 0) ids.push_back(c - back);
+    if (c % 2 == 1) std::reverse(ids.begin(), ids.end());  // another order, other slots
+    const KeyframeWindowFixture f(ids, /*first_point=*/3 * c, /*num_points=*/30, /*centre_stream=*/1 + c);
+    const PointAdjustProblem pr = f.Problem();
+    if (c % 7 == 3) {  // the call fails on the device after half of its updates; then it is made again
+      const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
+      const cuda::ResidentPointLayout& l = res.Plan(pr, checked);
+      std::vector<unsigned char> buf(l.bytes);
+      res.Write(pr, checked, buf.data());
+      dev.Apply(res, buf, (l.num_pose_updates + l.num_feature_updates) / 2);
+      res.Invalidate();
+      ++failures;
+    }
+    ResidentCall(res, dev, pr, "call " + std::to_string(c));
+  }
+  EXPECT_EQ(failures, 9);
 }
 
 // Successive keyframes' point adjustments with ids (what the System gives): every observation reads back from
@@ -809,7 +852,10 @@ TEST(CudaEquivalence, PointKernelWithIdsKeepsKeyframesOnTheDeviceAndScoresAsWith
   const KeyframeWindowFixture next(12, 12, 300, 20);
   resident->Score(next.Problem(), table, 4096, a.data());
   direct->Score(next.Problem(false), table, 4096, b.data());
-  for (int p = 0; p < 300; ++p) ASSERT_EQ(a[p].index, b[p].index) << "after a refused call, point " << p;
+  for (int p = 0; p < 300; ++p) {
+    ASSERT_EQ(a[p].index, b[p].index) << "after a refused call, point " << p;
+    ASSERT_EQ(a[p].score, b[p].score) << "after a refused call, point " << p;
+  }
 }
 
 // ---- A whole synthetic SLAM run: CPU vs CUDA -------------------------------------------------------

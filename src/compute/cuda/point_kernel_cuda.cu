@@ -156,8 +156,12 @@ class CudaPointKernel final : public PointKernel {
         StagePointProblem(pr, layout, h_problem);
       }
       unsigned char* d_problem = r.problem.Reserve(bytes);
+      // The stores only grow, and the record knows when they do (Plan grew it, and everything it asks for is
+      // sent again): a reallocation here loses nothing the record still counts on. Reserved before the copy is
+      // enqueued, so that a reallocation's cudaFree does not wait for it.
+      ScaledPose* d_poses = resident ? r.pose_store.Reserve(r.residency.pose_capacity()) : nullptr;
+      FeatureEntry* d_features = resident ? r.feature_store.Reserve(r.residency.feature_capacity()) : nullptr;
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, bytes, cudaMemcpyHostToDevice, stream));
-      r.bytes_uploaded += static_cast<long>(bytes);
       const auto score = [&](const auto& obs, size_t centres, size_t obs_begin, const char* name) {
         using Observations = std::decay_t<decltype(obs)>;
         ScorePointsKernel<Observations><<<static_cast<unsigned>(pr.num_points), kPointBlock, 0, stream>>>(
@@ -167,10 +171,6 @@ class CudaPointKernel final : public PointKernel {
         MCSLAM_CUDA_CHECK_LAUNCH(name);
       };
       if (resident) {
-        // The stores only grow, and the record knows when they do (Plan grew it, and everything it asks for
-        // is sent again): a reallocation here loses nothing the record still counts on.
-        ScaledPose* d_poses = r.pose_store.Reserve(r.residency.pose_capacity());
-        FeatureEntry* d_features = r.feature_store.Reserve(r.residency.feature_capacity());
         const int updates = rl->num_pose_updates + rl->num_feature_updates;
         if (updates > 0) {
           ApplyResidentUpdatesKernel<<<(updates + kUpdateBlock - 1) / kUpdateBlock, kUpdateBlock, 0, stream>>>(
@@ -190,6 +190,7 @@ class CudaPointKernel final : public PointKernel {
       }
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(h_best, d_best, sizeof(Candidate) * np, cudaMemcpyDeviceToHost, stream));
       r.stream.Synchronize();
+      r.bytes_uploaded += static_cast<long>(bytes);
     } catch (...) {
       cudaStreamSynchronize(stream);  // the pinned buffers are not reused while a copy may still read them
       if (resident) r.residency.Invalidate();  // what this call meant to put on the device may not be there
