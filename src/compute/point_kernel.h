@@ -59,7 +59,9 @@ std::unique_ptr<PointKernel> MakeCpuPointKernel(int threads = 0);
 
 // CUDA backend: one block per point, its threads over the samples. Defined only in builds with the CUDA
 // backend (MCSLAM_WITH_CUDA); throws as MakeCudaPoseKernel does, and std::invalid_argument from Score when
-// the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing).
+// the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing, ids given for
+// poses but not points or the reverse, a keyframe id or a (keyframe id, point id) pair twice in one call).
+// With ids, keyframe poses and features stay on the device across calls (compute/cuda/point_residency.h).
 std::unique_ptr<PointKernel> MakeCudaPointKernel(int device = 0);
 
 }  // namespace mcslam::compute
