@@ -137,9 +137,10 @@ void BenchPose(const PoseBenchArgs& a) {
 
 // The point-adjustment kernel (Algorithm 2) on the shape of one keyframe's adjustment: every point seen by
 // every keyframe of the window, the System's samples per point and window size by default. --successive:
-// the adjustments of successive keyframes instead, as a run makes them (compute::KeyframeWindowFixture, every
-// view): each call's window one keyframe on, a tenth of its points new, and keyframe and point ids given as
-// the System gives them, so that a device backend sends only what it does not hold yet.
+// the adjustments of successive keyframes instead, as a run makes them (compute::KeyframeWindowFixture): each
+// call's window one keyframe on, the current keyframe's `points` points adjusted over the keyframes that see
+// them (each keyframe sees a twentieth of its points fewer than the next), and the keyframes given whole as the
+// System gives them, so that a device backend sends only the keyframes it does not hold yet.
 struct PointBenchArgs : BenchBackends {
   std::vector<int> points{400};
   int samples = slam::MappingOptions{}.samples;
@@ -165,7 +166,7 @@ void BenchPoints(const PointBenchArgs& a) {
     std::vector<compute::KeyframeWindowFixture> successive;
     if (a.successive)
       for (int c = 0; c <= a.repeats; ++c)
-        successive.emplace_back(c, a.window, np, std::max(1, np / 10), /*seed=*/5, /*every_view=*/true);
+        successive.emplace_back(c, a.window, np, std::max(1, np / 20));
     const compute::PointFixture fx(a.successive ? 0 : np, a.window, compute::PointFixture::Views::kAll);
     const int observations = a.successive ? successive.back().observations() : fx.observations();
     const double evals = double(a.samples) * observations;
@@ -276,9 +277,9 @@ void RegisterBench(CLI::App& app) {
       ->capture_default_str();
   points->add_option("--repeats", qa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
   points->add_flag("--successive", qa->successive,
-                   "Time successive keyframes' adjustments, as a run makes them (the window one keyframe on and a "
-                   "tenth of the points new each call, with the ids that let a GPU keep keyframes and features), "
-                   "instead of one adjustment repeated");
+                   "Time successive keyframes' adjustments, as a run makes them (the window one keyframe on each "
+                   "call, each keyframe seeing a twentieth of the points fewer than the next, the keyframes given "
+                   "whole so that a GPU keeps them), instead of one adjustment repeated");
   AddBenchBackendFlags(points, qa.get());
   points->callback([qa] { BenchPoints(*qa); });
 

@@ -29,14 +29,18 @@ struct PointAdjustProblem {
   const float* obs_u = nullptr;
   const float* obs_v = nullptr;
   PoseScoringParams params;  // fx, fy, cap per observation, min depth
-  // Optional identities, both or neither: a stable id per keyframe pose (num_poses; the frame index) and per
-  // point (num_points; the map point id). With them a device backend keeps keyframe poses and feature
-  // positions on the device across calls and sends only what it does not hold yet (a keyframe id's pose, a
-  // (keyframe id, point id)'s feature, compared by value: a moved pose is sent again). Within one call the
-  // keyframe ids, and the (keyframe id, point id) pairs of the observations, must be distinct. The CPU
-  // backend does not need them.
+  // Optional, all five or none: the window's keyframes whole, so that a device backend can keep them on the
+  // device across calls and send only the keyframes it does not hold (compute/cuda/point_residency.h).
+  // pose_ids[k]: keyframe k's id (the frame index; distinct within a call; a keyframe id names the same
+  // keyframe from call to call, its pose and features compared by value, so a moved pose is sent again).
+  // keyframe_u/v[keyframe_begin[k] .. keyframe_begin[k + 1]): all of keyframe k's features (undistorted pixels
+  // minus the principal point). obs_feature[o]: observation o's index among its keyframe's features, which
+  // must hold the observation's (obs_u, obs_v) bit for bit. The CPU backend does not need them.
   const int64_t* pose_ids = nullptr;
-  const int64_t* point_ids = nullptr;
+  const int* keyframe_begin = nullptr;  // num_poses + 1 entries
+  const float* keyframe_u = nullptr;
+  const float* keyframe_v = nullptr;
+  const int* obs_feature = nullptr;
 };
 
 struct PointBest {
@@ -59,9 +63,9 @@ std::unique_ptr<PointKernel> MakeCpuPointKernel(int threads = 0);
 
 // CUDA backend: one block per point, its threads over the samples. Defined only in builds with the CUDA
 // backend (MCSLAM_WITH_CUDA); throws as MakeCudaPoseKernel does, and std::invalid_argument from Score when
-// the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing, ids given for
-// poses but not points or the reverse, a keyframe id or a (keyframe id, point id) pair twice in one call).
-// With ids, keyframe poses and features stay on the device across calls (compute/cuda/point_residency.h).
+// the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing; with the
+// keyframe fields: some of them missing, a keyframe id twice in one call, an observation that is not the
+// feature it names). With the keyframe fields, keyframes stay on the device across calls.
 std::unique_ptr<PointKernel> MakeCudaPointKernel(int device = 0);
 
 }  // namespace mcslam::compute

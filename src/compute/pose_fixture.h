@@ -2,7 +2,7 @@
 // Synthetic scoring problems for benchmarks and backend-equivalence tests. PoseFixture: `count` points on a
 // 1 m object about 3 m in front of an identity camera (the paper's set-up), features at their exact
 // projections. PointFixture (below): points seen by keyframes on an arc. KeyframeWindowFixture: the point
-// adjustments of successive keyframes, their windows and points overlapping as in a run.
+// adjustments of successive keyframes, their windows overlapping as in a run.
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -111,76 +111,91 @@ struct PointFixture : ArcCameras {
   PointAdjustProblem Problem() const { return PointProblemOf(*this); }
 };
 
-// The point adjustment of the call-th of successive keyframes, as the System runs them (a device backend keeps
-// their keyframes and features, compute/cuda/point_residency.h): the window is keyframes call .. call +
-// window - 1 (keyframe k 3 m from the origin, turned by 0.01 k rad about y), the points are ids call * shift
-// .. call * shift + num_points - 1 (point j within 0.3 m of the origin, seen by the window's keyframes k with
-// (j + k) % 4 != 0, or by all of them with every_view). A keyframe's pose and a (keyframe, point) feature
-// (exact projection, up to 1.5 px off) are the same in every call that has them; the centres (a few cm off
-// the truth) are the call's own.
+// Successive keyframes' point adjustments as the System makes them (a device backend keeps their keyframes,
+// compute/cuda/point_residency.h). Keyframe k (3 m from the origin, turned by 0.01 k rad about y) sees points
+// k * shift .. k * shift + per_keyframe - 1 (point j within 0.3 m of the origin): those are its features, their
+// exact projections up to 1.5 px off, the same in every call. A call adjusts the points of its current keyframe
+// (the window's first) over the window's keyframes that see them; the centres (a few cm off the truth) are the
+// call's own. KeyframeWindowFixture(c, window): the window is keyframes c + window - 1 (current) down to c, so
+// call c + 1's window is one keyframe on.
 struct KeyframeWindowFixture {
   std::vector<ScaledPose> poses;
-  std::vector<int64_t> pose_ids, point_ids;
+  std::vector<int64_t> pose_ids;
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
-  std::vector<int> begin{0}, pose_idx;
+  std::vector<int> begin{0}, pose_idx, obs_feature;
+  std::vector<int> keyframe_begin{0};
+  std::vector<float> keyframe_u, keyframe_v;
   PoseScoringParams params;
 
-  explicit KeyframeWindowFixture(int call, int window = 8, int num_points = 300, int shift = 20, uint64_t seed = 5,
-                                 bool every_view = false)
-      : KeyframeWindowFixture(Consecutive(call, window), static_cast<int64_t>(call) * shift, num_points,
-                              1 + static_cast<uint32_t>(call), seed, every_view) {}
+  explicit KeyframeWindowFixture(int call, int window = 8, int per_keyframe = 300, int shift = 20, uint64_t seed = 5)
+      : KeyframeWindowFixture(Consecutive(call, window), per_keyframe, shift, 1 + static_cast<uint32_t>(call), seed) {}
 
-  // Any window: keyframes `keyframe_ids` (distinct; a Fibonacci window has gaps), points first_point ..
-  // first_point + num_points - 1, the centres' offsets from stream centre_stream.
-  KeyframeWindowFixture(const std::vector<int64_t>& keyframe_ids, int64_t first_point, int num_points,
-                        uint32_t centre_stream, uint64_t seed = 5, bool every_view = false) {
+  // Any window (distinct keyframe ids, the current one first; a Fibonacci window has gaps); the centres'
+  // offsets from stream centre_stream.
+  KeyframeWindowFixture(const std::vector<int64_t>& window_ids, int per_keyframe, int shift, uint32_t centre_stream,
+                        uint64_t seed = 5) {
     params.fx = params.fy = 500.0f;
     params.max_distance_px = 50.0f;
-    for (const int64_t k : keyframe_ids) {
+    const auto point = [seed](int64_t j, float X[3]) {
+      CounterRng rng(seed, 100000 + static_cast<uint32_t>(j));
+      for (int a = 0; a < 3; ++a) X[a] = static_cast<float>(rng.Uniform(-0.3, 0.3));
+    };
+    for (const int64_t k : window_ids) {
       const float a = 0.01f * static_cast<float>(k);
       const float q[4] = {std::cos(a / 2), 0.0f, std::sin(a / 2), 0.0f};
       const float t[3] = {0.0f, 0.0f, 3.0f};
-      poses.push_back(MakeScaledPose(q, t, params.fx, params.fy));
+      const ScaledPose p = MakeScaledPose(q, t, params.fx, params.fy);
+      poses.push_back(p);
       pose_ids.push_back(k);
+      for (int64_t j = k * shift; j < k * shift + per_keyframe; ++j) {
+        float X[3];
+        point(j, X);
+        CounterRng feature_rng(seed ^ (static_cast<uint64_t>(k) << 20), static_cast<uint32_t>(j));
+        const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
+        const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
+        const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
+        keyframe_u.push_back(x / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+        keyframe_v.push_back(y / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+      }
+      keyframe_begin.push_back(static_cast<int>(keyframe_u.size()));
     }
-    const int window = static_cast<int>(keyframe_ids.size());
     CounterRng centre_rng(seed, centre_stream);
-    for (int i = 0; i < num_points; ++i) {
-      const int64_t j = first_point + i;
-      CounterRng point_rng(seed, 100000 + static_cast<uint32_t>(j));
+    const int64_t current = window_ids.empty() ? 0 : window_ids.front();
+    for (int64_t j = current * shift; j < current * shift + per_keyframe; ++j) {
       float X[3];
-      for (float& x : X) x = static_cast<float>(point_rng.Uniform(-0.3, 0.3));
+      point(j, X);
       cx.push_back(X[0] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
       cy.push_back(X[1] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
       cz.push_back(X[2] + static_cast<float>(centre_rng.Uniform(-0.03, 0.03)));
       sx.push_back(0.03f), sy.push_back(0.03f), sz.push_back(0.05f);
-      for (int w = 0; w < window; ++w) {
-        const int64_t k = pose_ids[static_cast<size_t>(w)];
-        if (!every_view && (j + k) % 4 == 0) continue;
-        CounterRng feature_rng(seed ^ (static_cast<uint64_t>(k) << 20), static_cast<uint32_t>(j));
-        const ScaledPose& p = poses[static_cast<size_t>(w)];
-        const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
-        const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
-        const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
-        pose_idx.push_back(w);
-        ou.push_back(x / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
-        ov.push_back(y / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+      for (size_t w = 0; w < window_ids.size(); ++w) {
+        const int64_t f = j - window_ids[w] * shift;  // the point's index among keyframe w's features
+        if (f < 0 || f >= per_keyframe) continue;
+        const int at = keyframe_begin[w] + static_cast<int>(f);
+        pose_idx.push_back(static_cast<int>(w));
+        obs_feature.push_back(static_cast<int>(f));
+        ou.push_back(keyframe_u[static_cast<size_t>(at)]);
+        ov.push_back(keyframe_v[static_cast<size_t>(at)]);
       }
       begin.push_back(static_cast<int>(pose_idx.size()));
-      point_ids.push_back(j);
     }
   }
   int observations() const { return begin.back() - begin.front(); }
-  PointAdjustProblem Problem(bool with_ids = true) const {
+  PointAdjustProblem Problem(bool with_keyframes = true) const {
     PointAdjustProblem pr = PointProblemOf(*this);
-    if (with_ids) pr.pose_ids = pose_ids.data(), pr.point_ids = point_ids.data();
+    if (with_keyframes) {
+      pr.pose_ids = pose_ids.data();
+      pr.keyframe_begin = keyframe_begin.data();
+      pr.keyframe_u = keyframe_u.data(), pr.keyframe_v = keyframe_v.data();
+      pr.obs_feature = obs_feature.data();
+    }
     return pr;
   }
 
  private:
   static std::vector<int64_t> Consecutive(int first, int count) {
     std::vector<int64_t> ids;
-    for (int w = 0; w < count; ++w) ids.push_back(first + w);
+    for (int w = count - 1; w >= 0; --w) ids.push_back(first + w);
     return ids;
   }
 };

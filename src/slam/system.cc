@@ -807,11 +807,19 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   const FrameRecord& cur = map_.frames[slot];
   std::vector<int> window;  // frame slots
   std::vector<compute::ScaledPose> poses;
-  std::vector<int64_t> pose_ids;  // frame indices: a device backend keeps the poses and features by them
+  // The window's keyframes whole (frame index, every feature): a device backend keeps them across calls.
+  std::vector<int64_t> pose_ids;
+  std::vector<int> keyframe_begin{0};
+  std::vector<float> keyframe_u, keyframe_v;
   for (int ws : WindowSlots()) {
     const FrameRecord& k = map_.frames[ws];
     window.push_back(ws);
     pose_ids.push_back(k.index);
+    for (const FeatureUndistorted& f : k.features) {
+      keyframe_u.push_back(float(f.uv_px.x() - camera_.cx));  // as the observations below: the same floats
+      keyframe_v.push_back(float(f.uv_px.y() - camera_.cy));
+    }
+    keyframe_begin.push_back(static_cast<int>(keyframe_u.size()));
     const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
     const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
     const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};
@@ -836,15 +844,19 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   std::vector<double> before_residual;
   std::vector<std::vector<std::pair<int, Eigen::Vector2d>>> cand_views;
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
-  std::vector<int> obs_begin{0}, obs_pose;
-  std::vector<int64_t> point_ids;
+  std::vector<int> obs_begin{0}, obs_pose, obs_feature;
   std::vector<std::pair<int, Eigen::Vector2d>> views;
+  std::vector<int> view_feature;  // each view's index among its keyframe's features
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* p = map_.Find(f.id);
     if (!p || p->state == PointState::kRemoved) continue;
     views.clear();
+    view_feature.clear();
     for (size_t w = 0; w < window.size(); ++w)
-      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) views.emplace_back(static_cast<int>(w), o->uv_px);
+      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) {
+        views.emplace_back(static_cast<int>(w), o->uv_px);
+        view_feature.push_back(static_cast<int>(o - map_.frames[window[w]].features.data()));
+      }
     // Fewer than 3 views: one view cannot tell a point from its ray, and the median of two residuals is not
     // robust to one wrong match, so no verdict is passed on this point yet.
     if (views.size() < 3) continue;
@@ -872,13 +884,13 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     const double depth = (cur.cam_from_world * p->position_in_world).z();
     if (!(depth > 0)) continue;  // behind this keyframe: no spread can be derived from it
     const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
-    for (const auto& [w, uv_obs] : views) {
-      obs_pose.push_back(w);
-      ou.push_back(float(uv_obs.x() - camera_.cx));
-      ov.push_back(float(uv_obs.y() - camera_.cy));
+    for (size_t i = 0; i < views.size(); ++i) {
+      obs_pose.push_back(views[i].first);
+      obs_feature.push_back(view_feature[i]);
+      ou.push_back(float(views[i].second.x() - camera_.cx));
+      ov.push_back(float(views[i].second.y() - camera_.cy));
     }
     cand.push_back(p);
-    point_ids.push_back(p->id);
     before_residual.push_back(before);
     cand_views.push_back(views);
     cx.push_back(float(p->position_in_world.x())), cy.push_back(float(p->position_in_world.y()));
@@ -900,7 +912,9 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   pr.params.fx = float(camera_.fx), pr.params.fy = float(camera_.fy);
   pr.params.max_distance_px = float(mo.max_distance_px);
   pr.pose_ids = pose_ids.data();
-  pr.point_ids = point_ids.data();
+  pr.keyframe_begin = keyframe_begin.data();
+  pr.keyframe_u = keyframe_u.data(), pr.keyframe_v = keyframe_v.data();
+  pr.obs_feature = obs_feature.data();
   std::vector<compute::PointBest> best(cand.size());
   point_kernel_->Score(pr, point_normals_, mo.samples, best.data());
 

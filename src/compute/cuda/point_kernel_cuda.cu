@@ -5,13 +5,13 @@
 // the winning position from its row, as the CPU backend does.
 //
 // Memory: the normal table on the device, uploaded when it changes (device_normal_table.h). A problem that
-// carries keyframe and point ids (what the System gives) keeps its keyframe poses and feature positions on
-// the device across calls (point_residency.h): a call stages its centres and spreads, one feature slot per
-// observation and only the poses and features the device does not hold yet into one pinned buffer, copies
-// it in one asynchronous copy, and a small kernel puts the new entries into the stores before the scoring
-// kernel reads them. A problem without ids is staged whole (point_staging.h). All threads of a block read
-// the same observation at the same time, so the poses and features are read straight from global memory (a
-// broadcast, L1-cached).
+// carries its keyframes whole (what the System gives) keeps them on the device across calls
+// (point_residency.h): a slot per keyframe with its pose and a block of its features. A call stages its
+// centres and spreads, one int per observation and only the keyframes the device does not hold yet into one
+// pinned buffer, copies it in one asynchronous copy, and a small kernel puts the new keyframes into the
+// stores before the scoring kernel reads them. A problem without them is staged whole (point_staging.h). All
+// threads of a block read the same observation at the same time, so the poses and features are read straight
+// from global memory (a broadcast, L1-cached).
 #include <cub/block/block_reduce.cuh>
 #include <cuda_runtime.h>
 
@@ -75,15 +75,16 @@ __global__ void __launch_bounds__(kPointBlock)
   if (threadIdx.x == 0) best_out[p] = best;
 }
 
-// Puts a call's new poses and features into the device stores (one thread per update).
+// Puts a call's new keyframes into the device stores: one block per keyframe, its threads over the features.
 constexpr int kUpdateBlock = 256;
 __global__ void __launch_bounds__(kUpdateBlock)
-    ApplyResidentUpdatesKernel(const PoseUpdate* __restrict__ pose_updates, int num_pose_updates,
-                               const FeatureUpdate* __restrict__ feature_updates, int num_feature_updates,
-                               ScaledPose* __restrict__ pose_store, FeatureEntry* __restrict__ feature_store) {
-  const int i = blockIdx.x * kUpdateBlock + static_cast<int>(threadIdx.x);
-  ApplyResidentUpdate(i, pose_updates, num_pose_updates, feature_updates, num_feature_updates, pose_store,
-                      feature_store);
+    ApplyKeyframeUpdatesKernel(const KeyframeUpdate* __restrict__ updates, const FeatureUV* __restrict__ update_features,
+                               int block_shift, ScaledPose* __restrict__ pose_store,
+                               FeatureUV* __restrict__ feature_store) {
+  const KeyframeUpdate u = updates[blockIdx.x];
+  const int n = u.count > 1 ? u.count : 1;  // i == 0 writes the pose even for a keyframe without features
+  for (int i = static_cast<int>(threadIdx.x); i < n; i += kUpdateBlock)
+    ApplyKeyframeUpdate(u, i, update_features, block_shift, pose_store, feature_store);
 }
 
 struct PointResources {
@@ -93,10 +94,11 @@ struct PointResources {
   DeviceBuffer<unsigned char> problem;
   DeviceBuffer<Candidate> best;  // one per point
   PinnedBuffer<Candidate> host_best;
-  // The device-resident keyframe poses and features of problems with ids, and the host's record of them.
+  // The device-resident keyframes (poses and feature blocks) of problems that carry them, and the host's
+  // record of them.
   PointResidency residency;
   DeviceBuffer<ScaledPose> pose_store;
-  DeviceBuffer<FeatureEntry> feature_store;
+  DeviceBuffer<FeatureUV> feature_store;
   long calls = 0;
   long bytes_uploaded = 0;  // staged problems sent (the normal table not counted)
 };
@@ -145,7 +147,7 @@ class CudaPointKernel final : public PointKernel {
     const size_t np = static_cast<size_t>(pr.num_points);
     Candidate* d_best = r.best.Reserve(np);
     Candidate* h_best = r.host_best.Reserve(np);
-    // With ids, the call's plan against the device-resident stores (throws std::invalid_argument, as above).
+    // With keyframes, the call's plan against the device-resident stores (throws std::invalid_argument, as above).
     const ResidentPointLayout* rl = resident ? &r.residency.Plan(pr, layout) : nullptr;
     try {
       const size_t bytes = resident ? rl->bytes : layout.bytes;
@@ -160,7 +162,7 @@ class CudaPointKernel final : public PointKernel {
       // sent again): a reallocation here loses nothing the record still counts on. Reserved before the copy is
       // enqueued, so that a reallocation's cudaFree does not wait for it.
       ScaledPose* d_poses = resident ? r.pose_store.Reserve(r.residency.pose_capacity()) : nullptr;
-      FeatureEntry* d_features = resident ? r.feature_store.Reserve(r.residency.feature_capacity()) : nullptr;
+      FeatureUV* d_features = resident ? r.feature_store.Reserve(r.residency.feature_capacity()) : nullptr;
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, bytes, cudaMemcpyHostToDevice, stream));
       const auto score = [&](const auto& obs, size_t centres, size_t obs_begin, const char* name) {
         using Observations = std::decay_t<decltype(obs)>;
@@ -171,15 +173,15 @@ class CudaPointKernel final : public PointKernel {
         MCSLAM_CUDA_CHECK_LAUNCH(name);
       };
       if (resident) {
-        const int updates = rl->num_pose_updates + rl->num_feature_updates;
-        if (updates > 0) {
-          ApplyResidentUpdatesKernel<<<(updates + kUpdateBlock - 1) / kUpdateBlock, kUpdateBlock, 0, stream>>>(
-              reinterpret_cast<const PoseUpdate*>(d_problem + rl->pose_updates), rl->num_pose_updates,
-              reinterpret_cast<const FeatureUpdate*>(d_problem + rl->feature_updates), rl->num_feature_updates,
-              d_poses, d_features);
-          MCSLAM_CUDA_CHECK_LAUNCH("ApplyResidentUpdatesKernel");
+        if (rl->num_keyframe_updates > 0) {
+          ApplyKeyframeUpdatesKernel<<<static_cast<unsigned>(rl->num_keyframe_updates), kUpdateBlock, 0, stream>>>(
+              reinterpret_cast<const KeyframeUpdate*>(d_problem + rl->keyframe_updates),
+              reinterpret_cast<const FeatureUV*>(d_problem + rl->update_features), rl->block_shift, d_poses,
+              d_features);
+          MCSLAM_CUDA_CHECK_LAUNCH("ApplyKeyframeUpdatesKernel");
         }
-        score(ResidentObservations{d_poses, d_features, reinterpret_cast<const int*>(d_problem + rl->obs_feature)},
+        score(ResidentObservations{d_poses, d_features, reinterpret_cast<const int*>(d_problem + rl->obs_index),
+                                   rl->block_shift},
               rl->centres, rl->obs_begin, "ScorePointsKernel<resident>");
       } else {
         score(DirectObservations{reinterpret_cast<const ScaledPose*>(d_problem + layout.poses),

@@ -1,20 +1,22 @@
 #pragma once
 // The point kernel's data kept on the device across calls (DESIGN.md, "GPU mapping": pose history and feature
 // positions live on the device). A point adjustment runs at every keyframe over a window of keyframes chosen
-// back from it; from one call to the next the window gains a keyframe and most of its poses and of its
-// features (a keyframe's view of a point) are the ones of the call before. So the device keeps two keyed
-// stores, mirrored on the host by SlotMirror (slot_mirror.h):
-//   - poses, keyed by the keyframe's id (PointAdjustProblem::pose_ids): its ScaledPose;
-//   - features, keyed by (keyframe id, point id): the keyframe's slot in the pose store and the feature (u, v).
-// A call sends only what the stores do not hold yet (a new keyframe's pose and its features, a pose a
-// settling adjustment moved) and, for every observation, the feature's slot (4 bytes instead of 12); the
-// centres and spreads are the call's own and always travel. The scoring kernel reads an observation through
-// ResidentObservations, the copy into the stores is ApplyResidentUpdate: both MCSLAM_HOST_DEVICE, so the host
-// tests run the very code the device runs. The host side (PointResidency) is plain C++17.
+// back from it; from one call to the next the window gains one keyframe and keeps most of the others. So the
+// device keeps whole keyframes, by keyframe id (PointAdjustProblem::pose_ids): a slot holds the keyframe's
+// ScaledPose and a block of all its features (u, v). A call sends its candidates' centres and spreads, one int
+// per observation (its keyframe's slot and its feature's index in the block, packed), and only the keyframes the
+// device does not hold as given: a new keyframe, one whose pose a settling adjustment moved, one whose slot was
+// reused, and all of them after the stores were reallocated or a call failed. The host's record is a
+// SlotMirror of the poses (slot_mirror.h) plus a copy of each slot's block, compared as a whole: no work per
+// observation beyond packing its index, and no hashing per observation.
+//
+// The scoring kernel reads an observation through ResidentObservations, the update kernel is
+// ApplyKeyframeUpdate: both MCSLAM_HOST_DEVICE, so the host tests run the very code the device runs.
+// PointResidency (the host side) is plain C++17.
+#include <climits>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <functional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -26,34 +28,28 @@
 
 namespace mcslam::compute::cuda {
 
-// One entry of the device's feature store.
-struct FeatureEntry {
-  int pose_slot;  // the keyframe's slot in the pose store
-  float u, v;     // undistorted pixels minus the principal point
+struct FeatureUV {
+  float u, v;  // undistorted pixels minus the principal point
 };
 
-// A value to copy into a store slot: the records a call sends for what the device does not hold yet.
-struct PoseUpdate {
+// A keyframe to put into slot `slot`: its pose, and its `count` features, which are update_features[first ..
+// first + count) of the call's staged buffer.
+struct KeyframeUpdate {
   int slot;
+  int count;
+  int first;
   ScaledPose pose;
 };
-struct FeatureUpdate {
-  int slot;
-  FeatureEntry entry;
-};
 
-// Update i of a call (pose updates first, then feature updates): the device runs it once per i, in any order
-// (every slot is written at most once a call: SlotMirror hands out one slot per key and a key once a call).
-MCSLAM_HOST_DEVICE MCSLAM_INLINE void ApplyResidentUpdate(int i, const PoseUpdate* pose_updates, int num_pose_updates,
-                                                          const FeatureUpdate* feature_updates,
-                                                          int num_feature_updates, ScaledPose* pose_store,
-                                                          FeatureEntry* feature_store) {
-  if (i < num_pose_updates) {
-    pose_store[pose_updates[i].slot] = pose_updates[i].pose;
-  } else if (i - num_pose_updates < num_feature_updates) {
-    const FeatureUpdate& f = feature_updates[i - num_pose_updates];
-    feature_store[f.slot] = f.entry;
-  }
+// Part `i` of keyframe update `u`: i == 0 also writes the pose; every i < count writes feature i into the
+// slot's block (block b holds features b << block_shift .. (b + 1) << block_shift - 1). The device runs one
+// block of threads per update, i over the threads; every slot is written by one update at most a call.
+MCSLAM_HOST_DEVICE MCSLAM_INLINE void ApplyKeyframeUpdate(const KeyframeUpdate& u, int i,
+                                                          const FeatureUV* update_features, int block_shift,
+                                                          ScaledPose* pose_store, FeatureUV* feature_store) {
+  if (i == 0) pose_store[u.slot] = u.pose;
+  if (i < u.count) feature_store[(static_cast<size_t>(u.slot) << block_shift) + static_cast<size_t>(i)] =
+      update_features[u.first + i];
 }
 
 // Observation o as the scoring loop reads it: the keyframe pose and the feature.
@@ -66,84 +62,82 @@ struct DirectObservations {  // the call's own arrays (PointAdjustProblem as giv
   MCSLAM_HOST_DEVICE MCSLAM_INLINE float U(int o) const { return obs_u[o]; }
   MCSLAM_HOST_DEVICE MCSLAM_INLINE float V(int o) const { return obs_v[o]; }
 };
-struct ResidentObservations {  // through the stores: observation o is feature obs_feature[o]
+struct ResidentObservations {  // through the stores: observation o is feature obs_index[o] of the store
   const ScaledPose* pose_store;
-  const FeatureEntry* feature_store;
-  const int* obs_feature;
-  MCSLAM_HOST_DEVICE MCSLAM_INLINE const ScaledPose& Pose(int o) const {
-    return pose_store[feature_store[obs_feature[o]].pose_slot];
-  }
-  MCSLAM_HOST_DEVICE MCSLAM_INLINE float U(int o) const { return feature_store[obs_feature[o]].u; }
-  MCSLAM_HOST_DEVICE MCSLAM_INLINE float V(int o) const { return feature_store[obs_feature[o]].v; }
-};
-
-struct FeatureKey {
-  int64_t pose_id;
-  int64_t point_id;
-  bool operator==(const FeatureKey& o) const { return pose_id == o.pose_id && point_id == o.point_id; }
-};
-struct FeatureKeyHash {
-  size_t operator()(const FeatureKey& k) const {
-    return std::hash<int64_t>()(k.pose_id) * 0x9E3779B97F4A7C15ull ^ std::hash<int64_t>()(k.point_id);
-  }
+  const FeatureUV* feature_store;
+  const int* obs_index;  // (keyframe slot << block_shift) + the feature's index in the keyframe's block
+  int block_shift;
+  MCSLAM_HOST_DEVICE MCSLAM_INLINE const ScaledPose& Pose(int o) const { return pose_store[obs_index[o] >> block_shift]; }
+  MCSLAM_HOST_DEVICE MCSLAM_INLINE float U(int o) const { return feature_store[obs_index[o]].u; }
+  MCSLAM_HOST_DEVICE MCSLAM_INLINE float V(int o) const { return feature_store[obs_index[o]].v; }
 };
 
 // Byte offsets of a resident call's sections in its one staged buffer (each aligned to 256 bytes).
 struct ResidentPointLayout {
-  int num_points = 0, num_obs = 0, num_pose_updates = 0, num_feature_updates = 0;
-  size_t centres = 0;          // 6 columns of num_points floats: cx, cy, cz, sx, sy, sz
-  size_t obs_begin = 0;        // num_points + 1 ints, rebased to 0
-  size_t obs_feature = 0;      // num_obs ints: the feature store slot of each observation
-  size_t pose_updates = 0;     // num_pose_updates PoseUpdate
-  size_t feature_updates = 0;  // num_feature_updates FeatureUpdate
+  int num_points = 0, num_obs = 0, num_keyframe_updates = 0, num_update_features = 0;
+  int block_shift = 0;
+  size_t centres = 0;           // 6 columns of num_points floats: cx, cy, cz, sx, sy, sz
+  size_t obs_begin = 0;         // num_points + 1 ints, rebased to 0
+  size_t obs_index = 0;         // num_obs ints (ResidentObservations::obs_index)
+  size_t keyframe_updates = 0;  // num_keyframe_updates KeyframeUpdate
+  size_t update_features = 0;   // num_update_features FeatureUV
   size_t bytes = 0;
 };
 
 class PointResidency {
  public:
-  explicit PointResidency(int min_capacity = 1024, int keep_calls = 64)
-      : poses_(min_capacity / 16 > 0 ? min_capacity / 16 : 1, keep_calls), features_(min_capacity, keep_calls) {}
+  // min_keyframes: pose slots of the first device array; keep_calls: how many calls an unused keyframe keeps
+  // its slot (a Fibonacci window reaches back further than it asks for each keyframe, so keep generously).
+  explicit PointResidency(int min_keyframes = 32, int keep_calls = 64) : poses_(min_keyframes, keep_calls) {}
 
-  // True when the problem carries the ids that let its data stay on the device; both or neither (else
-  // std::invalid_argument).
+  // True when the problem carries what lets its keyframes stay on the device (pose_ids, keyframe_begin,
+  // keyframe_u, keyframe_v, obs_feature): all or none (else std::invalid_argument).
   static bool Wanted(const PointAdjustProblem& pr) {
-    if ((pr.pose_ids == nullptr) != (pr.point_ids == nullptr))
-      FailPointProblem(std::string(pr.pose_ids ? "pose_ids is given without point_ids" : "point_ids is given without pose_ids"));
-    return pr.pose_ids != nullptr;
+    const int given = (pr.pose_ids != nullptr) + (pr.keyframe_begin != nullptr) + (pr.keyframe_u != nullptr) +
+                      (pr.keyframe_v != nullptr) + (pr.obs_feature != nullptr);
+    if (given != 0 && given != 5)
+      FailPointProblem("pose_ids, keyframe_begin, keyframe_u, keyframe_v and obs_feature are given together or "
+                       "not at all (" + std::to_string(given) + " of 5 given)");
+    return given == 5;
   }
 
-  // Decides what this call sends. `checked` is PlanPointStaging's layout of the same problem (the checks that
-  // keep every index in bounds have passed). Throws std::invalid_argument, with the stores' record left
-  // invalid (so the next call sends all it needs), when a keyframe id or a (keyframe, point) pair appears
-  // twice. Call Write next, then copy, apply the updates and score; on any failure of those, Invalidate().
+  // Checks the keyframes against the observations and decides what this call sends. `checked` is
+  // PlanPointStaging's layout of the same problem (its checks have passed). Throws std::invalid_argument
+  // (naming what is wrong) when a keyframe id appears twice, keyframe_begin decreases, an observation's feature
+  // index is outside its keyframe's features, or that feature is not the observation's (u, v) bit for bit: the
+  // device reads the keyframe's feature, the CPU the observation's, and they must be the same numbers. Then the
+  // record is left invalid (the next call sends all it needs). Call Write next, then copy, apply the updates and
+  // score; on any failure of those, Invalidate().
   const ResidentPointLayout& Plan(const PointAdjustProblem& pr, const PointStagingLayout& checked) {
     l_ = ResidentPointLayout{};
-    pose_updates_.clear();
-    feature_updates_.clear();
-    obs_feature_.clear();
+    updates_.clear();
+    update_features_.clear();
+    obs_index_.clear();
     if (checked.num_points == 0) return l_;
     try {
-      PlanStores(pr, checked);
+      CheckKeyframes(pr, checked);
+      PlanKeyframes(pr, checked);
     } catch (...) {
       Invalidate();
       throw;
     }
     l_.num_points = checked.num_points;
     l_.num_obs = checked.num_obs;
-    l_.num_pose_updates = static_cast<int>(pose_updates_.size());
-    l_.num_feature_updates = static_cast<int>(feature_updates_.size());
+    l_.num_keyframe_updates = static_cast<int>(updates_.size());
+    l_.num_update_features = static_cast<int>(update_features_.size());
+    l_.block_shift = block_shift_;
     const size_t np = static_cast<size_t>(l_.num_points), no = static_cast<size_t>(l_.num_obs);
     size_t at = 0;
     l_.centres = at;
     at = AlignStaging(at + sizeof(float) * 6 * np);
     l_.obs_begin = at;
     at = AlignStaging(at + sizeof(int) * (np + 1));
-    l_.obs_feature = at;
+    l_.obs_index = at;
     at = AlignStaging(at + sizeof(int) * no);
-    l_.pose_updates = at;
-    at = AlignStaging(at + sizeof(PoseUpdate) * pose_updates_.size());
-    l_.feature_updates = at;
-    at = AlignStaging(at + sizeof(FeatureUpdate) * feature_updates_.size());
+    l_.keyframe_updates = at;
+    at = AlignStaging(at + sizeof(KeyframeUpdate) * updates_.size());
+    l_.update_features = at;
+    at = AlignStaging(at + sizeof(FeatureUV) * update_features_.size());
     l_.bytes = at;
     return l_;
   }
@@ -156,82 +150,109 @@ class PointResidency {
     for (int c = 0; c < 6; ++c) std::memcpy(dst + l_.centres + sizeof(float) * np * c, columns[c], sizeof(float) * np);
     int* begin = reinterpret_cast<int*>(dst + l_.obs_begin);
     for (size_t p = 0; p <= np; ++p) begin[p] = pr.obs_begin[p] - checked.first_obs;
-    if (!obs_feature_.empty()) std::memcpy(dst + l_.obs_feature, obs_feature_.data(), sizeof(int) * obs_feature_.size());
-    if (!pose_updates_.empty())
-      std::memcpy(dst + l_.pose_updates, pose_updates_.data(), sizeof(PoseUpdate) * pose_updates_.size());
-    if (!feature_updates_.empty())
-      std::memcpy(dst + l_.feature_updates, feature_updates_.data(), sizeof(FeatureUpdate) * feature_updates_.size());
+    if (!obs_index_.empty()) std::memcpy(dst + l_.obs_index, obs_index_.data(), sizeof(int) * obs_index_.size());
+    if (!updates_.empty()) std::memcpy(dst + l_.keyframe_updates, updates_.data(), sizeof(KeyframeUpdate) * updates_.size());
+    if (!update_features_.empty())
+      std::memcpy(dst + l_.update_features, update_features_.data(), sizeof(FeatureUV) * update_features_.size());
   }
 
   const ResidentPointLayout& layout() const { return l_; }
-  // Slots the device stores must have for this call (they only grow; growing changes generation()).
+  // Sizes the device stores must have for this call: pose_capacity() poses and pose_capacity() << block_shift
+  // features. They only grow; growing changes generation() (a reallocated store holds nothing valid, and the
+  // record knows it).
   size_t pose_capacity() const { return poses_.capacity(); }
-  size_t feature_capacity() const { return features_.capacity(); }
-  // Change whenever a store's device copy is lost: a device array reallocated to the capacities above holds
-  // nothing valid, and the record knows it.
-  uint64_t pose_generation() const { return poses_.generation(); }
-  uint64_t feature_generation() const { return features_.generation(); }
-  size_t live_features() const { return features_.live(); }
-  // The device copy of this call's updates did not arrive: the next call sends everything it needs.
-  void Invalidate() {
-    poses_.Invalidate();
-    features_.Invalidate();
-  }
+  size_t feature_capacity() const { return poses_.capacity() << block_shift_; }
+  uint64_t generation() const { return poses_.generation(); }
+  // The device copy of this call's updates did not arrive: the next call sends every keyframe it needs.
+  void Invalidate() { poses_.Invalidate(); }
 
  private:
-  void PlanStores(const PointAdjustProblem& pr, const PointStagingLayout& checked) {
-    // Only the keyframes some observation refers to are asked for: a window pose nobody sees costs nothing.
-    std::vector<int> pose_slot(static_cast<size_t>(checked.num_poses), -1);
-    const int o0 = checked.first_obs, o1 = checked.first_obs + checked.num_obs;
-    for (int o = o0; o < o1; ++o) pose_slot[static_cast<size_t>(pr.obs_pose[o])] = -2;  // wanted
+  void CheckKeyframes(const PointAdjustProblem& pr, const PointStagingLayout& checked) const {
+    if (pr.keyframe_begin[0] < 0) FailPointProblem("keyframe_begin[0] is negative");
+    for (int k = 0; k < checked.num_poses; ++k)
+      if (pr.keyframe_begin[k + 1] < pr.keyframe_begin[k])
+        FailPointProblem("keyframe_begin decreases at keyframe " + std::to_string(k));
+  }
+
+  static uint32_t Bits(float x) {
+    uint32_t b;
+    std::memcpy(&b, &x, sizeof b);
+    return b;
+  }
+
+  void PlanKeyframes(const PointAdjustProblem& pr, const PointStagingLayout& checked) {
+    // Only the keyframes some observation refers to: a window keyframe nobody sees costs nothing.
+    std::vector<int> slot_of(static_cast<size_t>(checked.num_poses), -1);
+    for (int o = checked.first_obs; o < checked.first_obs + checked.num_obs; ++o)
+      slot_of[static_cast<size_t>(pr.obs_pose[o])] = -2;  // wanted
+    // The blocks hold the largest keyframe (a power of two); a larger one means new stores: all is sent again.
+    int largest = 0;
+    for (int k = 0; k < checked.num_poses; ++k)
+      if (slot_of[static_cast<size_t>(k)] == -2) largest = std::max(largest, pr.keyframe_begin[k + 1] - pr.keyframe_begin[k]);
+    int shift = block_shift_;
+    while ((1 << shift) < largest) ++shift;
+    if (shift != block_shift_) {
+      block_shift_ = shift;
+      poses_.Invalidate();
+    }
     poses_.BeginCall();
     for (int k = 0; k < checked.num_poses; ++k)
-      if (pose_slot[static_cast<size_t>(k)] == -2) poses_.Touch(pr.pose_ids[k]);
+      if (slot_of[static_cast<size_t>(k)] == -2) poses_.Touch(pr.pose_ids[k]);
     poses_.MakeRoom();
+    if (poses_.capacity() > static_cast<size_t>(INT_MAX >> block_shift_))
+      FailPointProblem("the keyframe store would exceed 2^31 features (" + std::to_string(poses_.capacity()) +
+                       " keyframes of up to " + std::to_string(1 << block_shift_) + ")");
+    if (blocks_.size() < poses_.capacity()) blocks_.resize(poses_.capacity());
     for (int k = 0; k < checked.num_poses; ++k) {
-      if (pose_slot[static_cast<size_t>(k)] != -2) continue;
+      if (slot_of[static_cast<size_t>(k)] != -2) continue;
       bool send = false;
-      const int slot = Acquire(poses_, pr.pose_ids[k], pr.poses[k], &send,
-                               [&] { return "keyframe id " + std::to_string(pr.pose_ids[k]); });
-      pose_slot[static_cast<size_t>(k)] = slot;
-      if (send) pose_updates_.push_back(PoseUpdate{slot, pr.poses[k]});
-    }
-    features_.BeginCall();
-    for (int p = 0; p < checked.num_points; ++p)
-      for (int o = pr.obs_begin[p]; o < pr.obs_begin[p + 1]; ++o)
-        features_.Touch(FeatureKey{pr.pose_ids[pr.obs_pose[o]], pr.point_ids[p]});
-    features_.MakeRoom();
-    obs_feature_.reserve(static_cast<size_t>(checked.num_obs));
-    for (int p = 0; p < checked.num_points; ++p) {
-      for (int o = pr.obs_begin[p]; o < pr.obs_begin[p + 1]; ++o) {
-        const int k = pr.obs_pose[o];
-        const FeatureEntry e{pose_slot[static_cast<size_t>(k)], pr.obs_u[o], pr.obs_v[o]};
-        bool send = false;
-        const int slot = Acquire(features_, FeatureKey{pr.pose_ids[k], pr.point_ids[p]}, e, &send, [&] {
-          return "(keyframe id, point id) (" + std::to_string(pr.pose_ids[k]) + ", " + std::to_string(pr.point_ids[p]) + ")";
-        });
-        obs_feature_.push_back(slot);
-        if (send) feature_updates_.push_back(FeatureUpdate{slot, e});
+      int slot = -1;
+      try {
+        slot = poses_.Acquire(pr.pose_ids[k], pr.poses[k], &send);
+      } catch (const std::invalid_argument&) {
+        FailPointProblem("keyframe id " + std::to_string(pr.pose_ids[k]) + " appears twice in one call");
       }
+      slot_of[static_cast<size_t>(k)] = slot;
+      // The block goes with the pose whenever the pose goes (a new key, a reused slot, a lost store), and
+      // alone never: a changed block is sent with its pose.
+      const int b = pr.keyframe_begin[k], count = pr.keyframe_begin[k + 1] - b;
+      Block& held = blocks_[static_cast<size_t>(slot)];
+      const size_t n = static_cast<size_t>(count);
+      const bool block_same = held.u.size() == n && std::memcmp(held.u.data(), pr.keyframe_u + b, n * sizeof(float)) == 0 &&
+                              std::memcmp(held.v.data(), pr.keyframe_v + b, n * sizeof(float)) == 0;
+      if (!send && block_same) continue;
+      held.u.assign(pr.keyframe_u + b, pr.keyframe_u + b + count);
+      held.v.assign(pr.keyframe_v + b, pr.keyframe_v + b + count);
+      updates_.push_back(KeyframeUpdate{slot, count, static_cast<int>(update_features_.size()), pr.poses[k]});
+      for (int i = 0; i < count; ++i) update_features_.push_back(FeatureUV{pr.keyframe_u[b + i], pr.keyframe_v[b + i]});
+    }
+    // Each observation's index, and the check that it is the feature it names (a failure here leaves the record
+    // invalid, as any failure of Plan does).
+    obs_index_.resize(static_cast<size_t>(checked.num_obs));
+    for (int o = checked.first_obs, i = 0; i < checked.num_obs; ++o, ++i) {
+      const int k = pr.obs_pose[o], f = pr.obs_feature[o];
+      const int first = pr.keyframe_begin[k], count = pr.keyframe_begin[k + 1] - first;
+      if (f < 0 || f >= count)
+        FailPointProblem("observation " + std::to_string(o) + " names feature " + std::to_string(f) + " of keyframe " +
+                         std::to_string(k) + ", which has " + std::to_string(count));
+      if (Bits(pr.keyframe_u[first + f]) != Bits(pr.obs_u[o]) || Bits(pr.keyframe_v[first + f]) != Bits(pr.obs_v[o]))
+        FailPointProblem("observation " + std::to_string(o) + " is not feature " + std::to_string(f) + " of keyframe " +
+                         std::to_string(k) + " (its u, v differ)");
+      obs_index_[static_cast<size_t>(i)] = (slot_of[static_cast<size_t>(k)] << block_shift_) + f;
     }
   }
 
-  // The mirror's Acquire, its "asked for twice" error said with the ids (`what` makes the words).
-  template <typename Mirror, typename K, typename V, typename What>
-  static int Acquire(Mirror& m, const K& key, const V& value, bool* send, const What& what) {
-    try {
-      return m.Acquire(key, value, send);
-    } catch (const std::invalid_argument&) {
-      FailPointProblem(what() + " appears twice in one call");
-    }
-  }
+  struct Block {  // the features the device holds in a slot (when the slot's pose is valid there)
+    std::vector<float> u, v;
+  };
 
   SlotMirror<int64_t, ScaledPose> poses_;
-  SlotMirror<FeatureKey, FeatureEntry, FeatureKeyHash> features_;
+  std::vector<Block> blocks_;  // per slot
+  int block_shift_ = 0;
   ResidentPointLayout l_;
-  std::vector<int> obs_feature_;
-  std::vector<PoseUpdate> pose_updates_;
-  std::vector<FeatureUpdate> feature_updates_;
+  std::vector<int> obs_index_;
+  std::vector<KeyframeUpdate> updates_;
+  std::vector<FeatureUV> update_features_;
 };
 
 }  // namespace mcslam::compute::cuda
