@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstring>
 #include <iostream>
@@ -931,6 +932,57 @@ void ExpectRunsAgree(const RunDifference& d) {
   EXPECT_LT(d.mean_centre_m, kRunMeanCentreM) << d;
   EXPECT_LT(d.max_rot_deg, kRunMaxRotDeg) << d;
   EXPECT_LT(d.mean_rot_deg, kRunMeanRotDeg) << d;
+}
+
+// A point kernel that plans each problem as the CUDA kernel does (its host side: the checks, and what stays
+// on the device) and scores it on the CPU. It lets a run without a GPU check what the System gives the CUDA
+// kernel: every problem carries its keyframes, consistent with its observations bit for bit, and from one
+// keyframe's adjustment to the next most keyframes are kept.
+struct PlanningCounts {
+  int calls = 0;
+  long keyframes_sent = 0, keyframes_observed = 0;
+  int fewest_kept = INT_MAX;  // over the calls after the first: keyframes found on the device
+};
+
+class PlanningPointKernel final : public PointKernel {
+ public:
+  explicit PlanningPointKernel(PlanningCounts* counts) : counts_(counts) {}
+  BackendKind kind() const override { return BackendKind::kCpu; }
+  void Score(const PointAdjustProblem& pr, const NormalTable& normals, int samples, PointBest* best) override {
+    const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
+    if (!cuda::PointResidency::Wanted(pr)) throw std::logic_error("a point problem without its keyframes");
+    const cuda::ResidentPointLayout& l = residency_.Plan(pr, checked);  // throws on any inconsistency
+    std::set<int> observed(pr.obs_pose + checked.first_obs, pr.obs_pose + checked.first_obs + checked.num_obs);
+    if (counts_->calls > 0)
+      counts_->fewest_kept = std::min(counts_->fewest_kept, static_cast<int>(observed.size()) - l.num_keyframe_updates);
+    ++counts_->calls;
+    counts_->keyframes_sent += l.num_keyframe_updates;
+    counts_->keyframes_observed += static_cast<long>(observed.size());
+    cpu_->Score(pr, normals, samples, best);
+  }
+
+ private:
+  PlanningCounts* counts_;  // outlives the kernel (the run owns and ends it)
+  cuda::PointResidency residency_;
+  std::unique_ptr<PointKernel> cpu_ = MakeCpuPointKernel();
+};
+
+TEST(CudaHost, TheSystemGivesThePointKernelItsKeyframesConsistently) {
+  slam::SystemOptions o;
+  o.tracker.hypotheses = 1 << 14;
+  o.mapping.candidate_threshold_px = 0.1;  // the clean scene's points are all under 2.5 px: adjust them anyway
+  o.mapping.samples = 256;
+  PlanningCounts k;
+  const apps::SlamRunResult r = apps::RunSlam(CleanScenario(kRunFrames), o, MakeCpuPoseKernel(),
+                                              std::make_unique<PlanningPointKernel>(&k), /*gt_scale=*/true);
+  ASSERT_TRUE(r.initialised);
+  std::cout << k.calls << " point adjustments: " << k.keyframes_sent << " of " << k.keyframes_observed
+            << " observed keyframes sent, at least " << k.fewest_kept << " kept in each after the first\n";
+  ASSERT_GE(k.calls, 5);
+  // Every adjustment after the first finds some of its keyframes on the device (its window overlaps the last
+  // one's; the keyframes it does send are new ones and ones a settling adjustment moved).
+  EXPECT_GE(k.fewest_kept, 1);
+  EXPECT_LT(k.keyframes_sent, k.keyframes_observed);
 }
 
 TEST(CudaEquivalence, CpuRunsWithTwoSeedsStayWithinTheWholeRunTolerance) {
