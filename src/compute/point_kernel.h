@@ -31,9 +31,9 @@ struct PointAdjustProblem {
   PoseScoringParams params;  // fx, fy, cap per observation, min depth
   // Optional, all five or none: the window's keyframes whole, so that a device backend can keep them on the
   // device across calls and send only the keyframes it does not hold (compute/cuda/point_residency.h).
-  // pose_ids[k]: keyframe k's id (the frame index; distinct within a call; a keyframe id names the same
-  // keyframe from call to call, its pose and features compared by value, so a moved pose is sent again).
-  // keyframe_u/v[keyframe_begin[k] .. keyframe_begin[k + 1]): all of keyframe k's features (undistorted pixels
+  // pose_ids[k]: keyframe k's id (the frame index; distinct within a call, at least among the keyframes that
+  // observations refer to; an id names the same keyframe from call to call, its pose and features compared by
+  // value, so a moved pose is sent again). keyframe_u/v[keyframe_begin[k] .. keyframe_begin[k + 1]): all of keyframe k's features (undistorted pixels
   // minus the principal point). obs_feature[o]: observation o's index among its keyframe's features, which
   // must hold the observation's (obs_u, obs_v) bit for bit. The CPU backend does not need them.
   const int64_t* pose_ids = nullptr;
@@ -64,8 +64,9 @@ std::unique_ptr<PointKernel> MakeCpuPointKernel(int threads = 0);
 // CUDA backend: one block per point, its threads over the samples. Defined only in builds with the CUDA
 // backend (MCSLAM_WITH_CUDA); throws as MakeCudaPoseKernel does, and std::invalid_argument from Score when
 // the problem is inconsistent (an observation of a pose that is not there, obs_begin decreasing; with the
-// keyframe fields: some of them missing, a keyframe id twice in one call, an observation that is not the
-// feature it names). With the keyframe fields, keyframes stay on the device across calls.
+// keyframe fields: some of them missing, one keyframe id for two keyframes that observations refer to, an
+// observation that is not the feature it names). With the keyframe fields, keyframes stay on the device across
+// calls.
 std::unique_ptr<PointKernel> MakeCudaPointKernel(int device = 0);
 
 }  // namespace mcslam::compute

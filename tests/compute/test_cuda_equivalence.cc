@@ -392,7 +392,7 @@ struct SimulatedResidentDevice {
 cuda::ResidentPointLayout ResidentCall(cuda::PointResidency& res, SimulatedResidentDevice& dev,
                                        const PointAdjustProblem& pr, const std::string& what) {
   const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
-  EXPECT_TRUE(cuda::PointResidency::Wanted(pr));
+  EXPECT_TRUE(cuda::PointResidency::Wanted(pr, checked));
   const cuda::ResidentPointLayout l = res.Plan(pr, checked);
   for (size_t off : {l.centres, l.obs_begin, l.obs_index, l.keyframe_updates, l.update_features, l.bytes})
     EXPECT_EQ(off % 256, 0u) << what;
@@ -436,11 +436,21 @@ TEST(CudaHost, ResidentPointCallsSendOnlyTheKeyframesTheDeviceLacksAndReadBackAs
   KeyframeWindowFixture moved = last;
   moved.poses[3].t[2] = std::nextafter(moved.poses[3].t[2], 10.0f);
   EXPECT_EQ(ResidentCall(res, dev, moved.Problem(), "moved keyframe").num_keyframe_updates, 1);
-  // A keyframe with more features than a block holds: new stores, every keyframe sent again.
-  KeyframeWindowFixture big(std::vector<int64_t>{13 + 7, 13 + 6, 13 + 5}, /*per_keyframe=*/200, 5, 99);
-  const cuda::ResidentPointLayout b = ResidentCall(res, dev, big.Problem(), "larger keyframes");
-  EXPECT_EQ(b.num_keyframe_updates, 3);
-  EXPECT_EQ(b.block_shift, 8);  // 200 features: blocks of 256
+  // The next keyframe has more features than a block holds (60 of its own and 100 more; the others are as the
+  // device has them): a new layout, so every keyframe is sent again.
+  KeyframeWindowFixture big(14, 8, 60, 5);
+  const std::vector<float> extra(100, 1.0f);
+  const int end_of_new = big.keyframe_begin[1];  // keyframe 0 of the window is the new one
+  big.keyframe_u.insert(big.keyframe_u.begin() + end_of_new, extra.begin(), extra.end());
+  big.keyframe_v.insert(big.keyframe_v.begin() + end_of_new, extra.begin(), extra.end());
+  for (size_t k = 1; k < big.keyframe_begin.size(); ++k) big.keyframe_begin[k] += 100;
+  EXPECT_EQ(again.block_shift, 6);  // 60 features: blocks of 64
+  const cuda::ResidentPointLayout b = ResidentCall(res, dev, big.Problem(), "a larger keyframe");
+  EXPECT_EQ(b.block_shift, 8);  // 160 features: blocks of 256
+  EXPECT_EQ(b.num_keyframe_updates, 8);
+  // The next call keeps the others in the new layout: it sends its new keyframe, and keyframe 21 (the larger
+  // one above), whose features are the fixture's 60 again: a changed block goes, with its pose.
+  EXPECT_EQ(ResidentCall(res, dev, KeyframeWindowFixture(15, 8, 60, 5).Problem(), "after").num_keyframe_updates, 2);
 }
 
 // Wrong keyframe data is refused naming what is wrong, before anything is sent; the record is then invalid, so
@@ -474,8 +484,20 @@ TEST(CudaHost, ResidentPointCallsRefuseKeyframesThatDoNotMatchTheirObservations)
   refused(shifted.Problem(), "is not feature");
   PointAdjustProblem partial = f.Problem();
   partial.keyframe_v = nullptr;
-  EXPECT_THROW(cuda::PointResidency::Wanted(partial), std::invalid_argument);
-  EXPECT_FALSE(cuda::PointResidency::Wanted(f.Problem(false)));
+  partial.obs_feature = nullptr;
+  try {
+    cuda::PointResidency::Wanted(partial, cuda::PlanPointStaging(partial));
+    ADD_FAILURE() << "keyframes without keyframe_v and obs_feature accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("without keyframe_v, obs_feature"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(cuda::PointResidency::Wanted(f.Problem(false), cuda::PlanPointStaging(f.Problem(false))));
+  // Nothing to point at: no observations (empty vectors give null pointers) is not a missing array.
+  PointAdjustProblem unobserved = f.Problem();
+  std::vector<int> no_obs(static_cast<size_t>(unobserved.num_points) + 1, 0);
+  unobserved.obs_begin = no_obs.data();
+  unobserved.obs_feature = nullptr;
+  EXPECT_TRUE(cuda::PointResidency::Wanted(unobserved, cuda::PlanPointStaging(unobserved)));
 }
 
 // Windows as the System chooses them (Fibonacci: keyframe i is in the windows of i, i+1, i+2, i+3, i+5, i+8,
@@ -486,13 +508,13 @@ TEST(CudaHost, ResidentPointCallsRefuseKeyframesThatDoNotMatchTheirObservations)
 TEST(CudaHost, ResidentPointCallsSurviveReturningKeyframesAndFailedCalls) {
   cuda::PointResidency res(/*min_keyframes=*/2, /*keep_calls=*/1);
   SimulatedResidentDevice dev;
-  int failures = 0;
+  int failures = 0, calls_keeping = 0;
   for (int c = 0; c < 60; ++c) {
     std::vector<int64_t> ids;
     for (int back : {0, 1, 2, 3, 5, 8, 13, 21, 34})
       if (c - back >= 0) ids.push_back(c - back);
     if (c % 2 == 1) std::reverse(ids.begin() + 1, ids.end());  // another order, other slots
-    const KeyframeWindowFixture f(ids, /*per_keyframe=*/30 + c % 5, /*shift=*/1, /*centre_stream=*/1 + c);
+    const KeyframeWindowFixture f(ids, /*per_keyframe=*/30, /*shift=*/1, /*centre_stream=*/1 + c);
     const PointAdjustProblem pr = f.Problem();
     if (c % 7 == 3) {  // the call fails on the device after half of its updates; then it is made again
       const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
@@ -503,9 +525,13 @@ TEST(CudaHost, ResidentPointCallsSurviveReturningKeyframesAndFailedCalls) {
       res.Invalidate();
       ++failures;
     }
-    ResidentCall(res, dev, pr, "call " + std::to_string(c));
+    const cuda::ResidentPointLayout l = ResidentCall(res, dev, pr, "call " + std::to_string(c));
+    const std::set<int> observed(f.pose_idx.begin(), f.pose_idx.end());
+    calls_keeping += l.num_keyframe_updates < static_cast<int>(observed.size());
   }
   EXPECT_EQ(failures, 9);
+  // Most calls find some of their keyframes on the device: the kept path is exercised, not only fresh sends.
+  EXPECT_GT(calls_keeping, 40);
 }
 
 TEST(CudaHost, BackendSelectionIsExplicitAndNeverFallsBackSilently) {
@@ -841,8 +867,26 @@ TEST(CudaEquivalence, PointKernelKeepsKeyframesOnTheDeviceAndScoresAsWithout) {
           << "call " << c << ", point " << p;
     }
   }
+  // Windows as the System chooses them (Fibonacci, keyframes leaving and coming back) over 100 keyframes: more
+  // than the 32 keyframe slots the kernel starts with (the stores grow, on the host's record 128), and one call
+  // whose keyframes have more features than the blocks hold (a new layout, and the next call sends its
+  // keyframes again with their usual features). Still the very answers of the whole problem.
+  for (int c = 0; c < 100; ++c) {
+    std::vector<int64_t> ids;
+    for (int back : {0, 1, 2, 3, 5, 8, 13, 21, 34, 55, 89})
+      if (c - back >= 0) ids.push_back(c - back);
+    const KeyframeWindowFixture f(ids, /*per_keyframe=*/c == 70 ? 500 : 200, /*shift=*/2, /*centre_stream=*/1 + c);
+    const int n = f.Problem().num_points;
+    std::vector<PointBest> a(n), b(n);
+    resident->Score(f.Problem(), table, 1024, a.data());
+    direct->Score(f.Problem(false), table, 1024, b.data());
+    for (int p = 0; p < n; ++p) {
+      ASSERT_EQ(a[p].index, b[p].index) << "Fibonacci call " << c << ", point " << p;
+      ASSERT_EQ(a[p].score, b[p].score) << "Fibonacci call " << c << ", point " << p;
+    }
+  }
   const cuda::CudaKernelStats rs = Stats(*resident), ds = Stats(*direct);
-  std::cout << "12 keyframes' adjustments (12-keyframe window, 400 points a keyframe): " << rs.bytes_uploaded
+  std::cout << "112 keyframes' adjustments (12 consecutive, 100 Fibonacci windows): " << rs.bytes_uploaded
             << " bytes sent with the keyframes kept, " << ds.bytes_uploaded << " with each problem whole\n";
   EXPECT_LT(rs.bytes_uploaded, ds.bytes_uploaded);
   // A call with a repeated keyframe id is refused before anything reaches the device, and the next call is
@@ -950,7 +994,7 @@ class PlanningPointKernel final : public PointKernel {
   BackendKind kind() const override { return BackendKind::kCpu; }
   void Score(const PointAdjustProblem& pr, const NormalTable& normals, int samples, PointBest* best) override {
     const cuda::PointStagingLayout checked = cuda::PlanPointStaging(pr);
-    if (!cuda::PointResidency::Wanted(pr)) throw std::logic_error("a point problem without its keyframes");
+    if (!cuda::PointResidency::Wanted(pr, checked)) throw std::logic_error("a point problem without its keyframes");
     const cuda::ResidentPointLayout& l = residency_.Plan(pr, checked);  // throws on any inconsistency
     std::set<int> observed(pr.obs_pose + checked.first_obs, pr.obs_pose + checked.first_obs + checked.num_obs);
     if (counts_->calls > 0)

@@ -136,7 +136,7 @@ class CudaPointKernel final : public PointKernel {
       return;
     }
     const PointStagingLayout layout = PlanPointStaging(pr);  // throws std::invalid_argument
-    const bool resident = PointResidency::Wanted(pr);         // likewise
+    const bool resident = PointResidency::Wanted(pr, layout);  // likewise
 
     const std::lock_guard<std::mutex> call_lock(call_mutex_);  // one call at a time per kernel object
     ScopedDevice scoped(device_);

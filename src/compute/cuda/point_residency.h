@@ -91,14 +91,23 @@ class PointResidency {
   explicit PointResidency(int min_keyframes = 32, int keep_calls = 64) : poses_(min_keyframes, keep_calls) {}
 
   // True when the problem carries what lets its keyframes stay on the device (pose_ids, keyframe_begin,
-  // keyframe_u, keyframe_v, obs_feature): all or none (else std::invalid_argument).
-  static bool Wanted(const PointAdjustProblem& pr) {
-    const int given = (pr.pose_ids != nullptr) + (pr.keyframe_begin != nullptr) + (pr.keyframe_u != nullptr) +
-                      (pr.keyframe_v != nullptr) + (pr.obs_feature != nullptr);
-    if (given != 0 && given != 5)
-      FailPointProblem("pose_ids, keyframe_begin, keyframe_u, keyframe_v and obs_feature are given together or "
-                       "not at all (" + std::to_string(given) + " of 5 given)");
-    return given == 5;
+  // keyframe_u, keyframe_v, obs_feature). Given one, the others are needed too (std::invalid_argument naming the
+  // missing ones), except where there is nothing to point at: keyframe_u and keyframe_v for keyframes without
+  // features, obs_feature without observations, pose_ids without poses. `checked`: PlanPointStaging's layout.
+  static bool Wanted(const PointAdjustProblem& pr, const PointStagingLayout& checked) {
+    if (!pr.pose_ids && !pr.keyframe_begin && !pr.keyframe_u && !pr.keyframe_v && !pr.obs_feature) return false;
+    std::string missing;
+    const auto need = [&missing](bool ok, const char* name) {
+      if (!ok) missing += (missing.empty() ? "" : ", ") + std::string(name);
+    };
+    need(pr.pose_ids || checked.num_poses == 0, "pose_ids");
+    need(pr.keyframe_begin != nullptr, "keyframe_begin");
+    const bool features = pr.keyframe_begin && pr.keyframe_begin[checked.num_poses] > pr.keyframe_begin[0];
+    need(pr.keyframe_u || !features, "keyframe_u");
+    need(pr.keyframe_v || !features, "keyframe_v");
+    need(pr.obs_feature || checked.num_obs == 0, "obs_feature");
+    if (!missing.empty()) FailPointProblem("the keyframes are given without " + missing);
+    return true;
   }
 
   // Checks the keyframes against the observations and decides what this call sends. `checked` is
@@ -218,8 +227,9 @@ class PointResidency {
       const int b = pr.keyframe_begin[k], count = pr.keyframe_begin[k + 1] - b;
       Block& held = blocks_[static_cast<size_t>(slot)];
       const size_t n = static_cast<size_t>(count);
-      const bool block_same = held.u.size() == n && std::memcmp(held.u.data(), pr.keyframe_u + b, n * sizeof(float)) == 0 &&
-                              std::memcmp(held.v.data(), pr.keyframe_v + b, n * sizeof(float)) == 0;
+      const bool block_same = held.u.size() == n &&
+                              (n == 0 || (std::memcmp(held.u.data(), pr.keyframe_u + b, n * sizeof(float)) == 0 &&
+                                          std::memcmp(held.v.data(), pr.keyframe_v + b, n * sizeof(float)) == 0));
       if (!send && block_same) continue;
       held.u.assign(pr.keyframe_u + b, pr.keyframe_u + b + count);
       held.v.assign(pr.keyframe_v + b, pr.keyframe_v + b + count);

@@ -1,8 +1,8 @@
 #pragma once
 // Host side of the CUDA point kernel: the checks that keep the device from reading out of bounds (every
 // call), and the layout of the one buffer that carries a whole PointAdjustProblem to the device (one copy per
-// call) when the problem has no ids (with ids, point_residency.h stages only what the device lacks). Plain
-// C++17: the host tests check it without a GPU.
+// call) when the problem does not carry its keyframes (when it does, point_residency.h stages only the
+// keyframes the device lacks). Plain C++17: the host tests check it without a GPU.
 #include <cstddef>
 #include <cstring>
 #include <stdexcept>
