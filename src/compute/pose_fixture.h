@@ -35,6 +35,15 @@ struct PoseFixture {
   }
 };
 
+// The exact observation of world point X by a camera with pre-scaled pose p (undistorted px minus the
+// principal point).
+inline void ObserveBy(const ScaledPose& p, const float X[3], float* u, float* v) {
+  const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
+  const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
+  const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
+  *u = x / z, *v = y / z;
+}
+
 // Keyframes for point-kernel tests and benchmarks: `count` cameras 3 m from the origin, looking at it from an
 // arc (rotations about y, 0.03 rad apart and centred on 0: five cameras span -0.06 .. 0.06 rad), with
 // f = 500 px and a 50 px cap.
@@ -53,13 +62,7 @@ struct ArcCameras {
     }
   }
   // The exact observation of a world point in camera k (undistorted px minus the principal point).
-  void Observe(int k, const float X[3], float* u, float* v) const {
-    const ScaledPose& p = poses[k];
-    const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
-    const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
-    const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
-    *u = x / z, *v = y / z;
-  }
+  void Observe(int k, const float X[3], float* u, float* v) const { ObserveBy(poses[k], X, u, v); }
 };
 
 // A view of a fixture's arrays (poses, cx .. sz, begin, pose_idx, ou, ov, params) as a PointAdjustProblem.
@@ -151,11 +154,10 @@ struct KeyframeWindowFixture {
         float X[3];
         point(j, X);
         CounterRng feature_rng(seed ^ (static_cast<uint64_t>(k) << 20), static_cast<uint32_t>(j));
-        const float x = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
-        const float y = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
-        const float z = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
-        keyframe_u.push_back(x / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
-        keyframe_v.push_back(y / z + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+        float u, v;
+        ObserveBy(p, X, &u, &v);
+        keyframe_u.push_back(u + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
+        keyframe_v.push_back(v + static_cast<float>(feature_rng.Uniform(-1.5, 1.5)));
       }
       keyframe_begin.push_back(static_cast<int>(keyframe_u.size()));
     }

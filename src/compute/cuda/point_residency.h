@@ -154,11 +154,7 @@ class PointResidency {
   // Writes the planned call into dst (layout().bytes bytes).
   void Write(const PointAdjustProblem& pr, const PointStagingLayout& checked, unsigned char* dst) const {
     if (l_.num_points == 0) return;
-    const size_t np = static_cast<size_t>(l_.num_points);
-    const float* columns[6] = {pr.cx, pr.cy, pr.cz, pr.sx, pr.sy, pr.sz};
-    for (int c = 0; c < 6; ++c) std::memcpy(dst + l_.centres + sizeof(float) * np * c, columns[c], sizeof(float) * np);
-    int* begin = reinterpret_cast<int*>(dst + l_.obs_begin);
-    for (size_t p = 0; p <= np; ++p) begin[p] = pr.obs_begin[p] - checked.first_obs;
+    StagePointColumns(pr, checked.first_obs, dst + l_.centres, dst + l_.obs_begin);
     if (!obs_index_.empty()) std::memcpy(dst + l_.obs_index, obs_index_.data(), sizeof(int) * obs_index_.size());
     if (!updates_.empty()) std::memcpy(dst + l_.keyframe_updates, updates_.data(), sizeof(KeyframeUpdate) * updates_.size());
     if (!update_features_.empty())

@@ -76,14 +76,22 @@ inline PointStagingLayout PlanPointStaging(const PointAdjustProblem& pr) {
 }
 
 // Writes the problem into dst (l.bytes bytes, laid out as planned).
+// The part every staged call carries, whole or with its keyframes kept (point_residency.h): the centres and
+// spreads as 6 columns of num_points floats at `centres`, and obs_begin rebased by first_obs at `obs_begin`.
+inline void StagePointColumns(const PointAdjustProblem& pr, int first_obs, unsigned char* centres,
+                              unsigned char* obs_begin) {
+  const size_t np = static_cast<size_t>(pr.num_points);
+  const float* columns[6] = {pr.cx, pr.cy, pr.cz, pr.sx, pr.sy, pr.sz};
+  for (int c = 0; c < 6; ++c) std::memcpy(centres + sizeof(float) * np * c, columns[c], sizeof(float) * np);
+  int* begin = reinterpret_cast<int*>(obs_begin);
+  for (size_t p = 0; p <= np; ++p) begin[p] = pr.obs_begin[p] - first_obs;
+}
+
 inline void StagePointProblem(const PointAdjustProblem& pr, const PointStagingLayout& l, unsigned char* dst) {
   if (l.num_points == 0) return;
-  const size_t np = static_cast<size_t>(l.num_points), no = static_cast<size_t>(l.num_obs);
+  const size_t no = static_cast<size_t>(l.num_obs);
   if (l.num_poses > 0 && pr.poses) std::memcpy(dst + l.poses, pr.poses, sizeof(ScaledPose) * l.num_poses);
-  const float* columns[6] = {pr.cx, pr.cy, pr.cz, pr.sx, pr.sy, pr.sz};
-  for (int c = 0; c < 6; ++c) std::memcpy(dst + l.centres + sizeof(float) * np * c, columns[c], sizeof(float) * np);
-  int* begin = reinterpret_cast<int*>(dst + l.obs_begin);
-  for (size_t p = 0; p <= np; ++p) begin[p] = pr.obs_begin[p] - l.first_obs;
+  StagePointColumns(pr, l.first_obs, dst + l.centres, dst + l.obs_begin);
   if (no > 0) {
     std::memcpy(dst + l.obs_pose, pr.obs_pose + l.first_obs, sizeof(int) * no);
     std::memcpy(dst + l.obs_u, pr.obs_u + l.first_obs, sizeof(float) * no);
