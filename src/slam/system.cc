@@ -816,7 +816,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     window.push_back(ws);
     pose_ids.push_back(k.index);
     for (const FeatureUndistorted& f : k.features) {
-      keyframe_u.push_back(float(f.uv_px.x() - camera_.cx));  // as the observations below: the same floats
+      keyframe_u.push_back(float(f.uv_px.x() - camera_.cx));
       keyframe_v.push_back(float(f.uv_px.y() - camera_.cy));
     }
     keyframe_begin.push_back(static_cast<int>(keyframe_u.size()));
@@ -885,10 +885,12 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     if (!(depth > 0)) continue;  // behind this keyframe: no spread can be derived from it
     const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
     for (size_t i = 0; i < views.size(); ++i) {
+      // The observation is its keyframe's feature: the very floats a device backend keeps for that keyframe.
+      const int at = keyframe_begin[views[i].first] + view_feature[i];
       obs_pose.push_back(views[i].first);
       obs_feature.push_back(view_feature[i]);
-      ou.push_back(float(views[i].second.x() - camera_.cx));
-      ov.push_back(float(views[i].second.y() - camera_.cy));
+      ou.push_back(keyframe_u[at]);
+      ov.push_back(keyframe_v[at]);
     }
     cand.push_back(p);
     before_residual.push_back(before);
