@@ -44,7 +44,9 @@ class PaperPath {
     }
   }
 
-  Pose CamFromWorld(double t) const {
+  // Always inlined: how the compiler fuses its products into FMAs depends on where it is inlined, and the
+  // paper's files (its ground truth to the last bit) must stay what they were when this had one caller.
+  [[gnu::always_inline]] Pose CamFromWorld(double t) const {
     const double az = -DegToRad(40.0) * std::cos(kPi * t / 10.0 + sweep_phase_) + az_wiggle_.At(t);
     const double el = DegToRad(20.0) + el_[0].At(t) + el_[1].At(t);
     const double r = 3.0 + radius_[0].At(t) + radius_[1].At(t);
@@ -90,29 +92,12 @@ void MakeBoxPoints(int num_points, uint64_t seed, std::vector<Eigen::Vector3d>* 
     double sign;  // +1 or -1
   };
   const std::array<Face, 6> faces{{{0, 1}, {0, -1}, {1, 1}, {1, -1}, {2, 1}, {2, -1}}};
-  std::array<double, 6> area{};
-  double total_area = 0;
+  std::vector<double> area(6);
   for (int f = 0; f < 6; ++f) {
     const int a = (faces[f].axis + 1) % 3, b = (faces[f].axis + 2) % 3;
     area[f] = 4.0 * half[a] * half[b];
-    total_area += area[f];
   }
-  std::array<int, 6> count{};
-  std::array<double, 6> remainder{};
-  int assigned = 0;
-  for (int f = 0; f < 6; ++f) {
-    const double exact = num_points * area[f] / total_area;
-    count[f] = static_cast<int>(std::floor(exact));
-    remainder[f] = exact - count[f];
-    assigned += count[f];
-  }
-  while (assigned < num_points) {
-    // Ties go to the lower face index: deterministic.
-    const int f = static_cast<int>(std::max_element(remainder.begin(), remainder.end()) - remainder.begin());
-    ++count[f];
-    remainder[f] = -1.0;
-    ++assigned;
-  }
+  const std::vector<int> count = LargestRemainderCounts(area, num_points);
 
   CounterRng rng(seed, kStreamPoints);
   points->clear();
@@ -135,6 +120,11 @@ void MakeBoxPoints(int num_points, uint64_t seed, std::vector<Eigen::Vector3d>* 
 }
 
 }  // namespace
+
+PaperPathFunction MakePaperPath(uint64_t seed) {
+  const PaperPath path(seed);
+  return [path](double t) { return path.CamFromWorld(t); };
+}
 
 void PaperScenarioOptions::Check() const {
   if (frames < 1) throw std::invalid_argument("frames must be >= 1, got " + std::to_string(frames));
@@ -169,29 +159,43 @@ SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options) {
   SyntheticSequence seq;
   seq.camera = PaperCamera();
   seq.fps = options.fps;
+  seq.scene = PaperScene();
   MakeBoxPoints(options.num_points, options.seed, &seq.points_in_world, &seq.normals_in_world);
 
   const PaperPath path(options.seed);
-  CounterRng noise_rng(options.seed, kStreamNoise);
-  CounterRng pick_rng(options.seed, kStreamOutlierPick);
-  CounterRng pixel_rng(options.seed, kStreamOutlierPixel);
-  const PinholeCamera& cam = seq.camera;
-
   seq.cam_from_world.reserve(options.frames);
   seq.stamps_s.reserve(options.frames);
-  seq.frames.resize(options.frames);
   for (int i = 0; i < options.frames; ++i) {
     const double stamp_s = i / options.fps;
-    const Pose cam_from_world = path.CamFromWorld(options.speed * stamp_s);
     seq.stamps_s.push_back(stamp_s);
-    seq.cam_from_world.push_back(cam_from_world);
-    std::vector<SyntheticObservation>& obs = seq.frames[i].observations;
-    for (size_t j = 0; j < seq.points_in_world.size(); ++j) {
+    seq.cam_from_world.push_back(path.CamFromWorld(options.speed * stamp_s));
+  }
+  // The box is convex: a point whose face faces the camera is not hidden by the box, and the floor (no
+  // points) is below it; the face test is exact occlusion here.
+  ObservePoints(options.noise_px, options.outlier_fraction, options.seed,
+                [&](const Pose& cam_from_world, size_t j, Eigen::Vector2d* uv_px) {
+                  return IsPointVisible(seq.camera, cam_from_world, seq.points_in_world[j], seq.normals_in_world[j],
+                                        uv_px);
+                },
+                &seq);
+  return seq;
+}
+
+void ObservePoints(double noise_px, double outlier_fraction, uint64_t seed, const PointVisibility& visible,
+                   SyntheticSequence* seq) {
+  CounterRng noise_rng(seed, kStreamNoise);
+  CounterRng pick_rng(seed, kStreamOutlierPick);
+  CounterRng pixel_rng(seed, kStreamOutlierPixel);
+  const PinholeCamera& cam = seq->camera;
+  seq->frames.assign(seq->cam_from_world.size(), SyntheticFrame{});
+  for (size_t i = 0; i < seq->cam_from_world.size(); ++i) {
+    std::vector<SyntheticObservation>& obs = seq->frames[i].observations;
+    for (size_t j = 0; j < seq->points_in_world.size(); ++j) {
       Eigen::Vector2d uv_true;
-      if (!IsPointVisible(cam, cam_from_world, seq.points_in_world[j], seq.normals_in_world[j], &uv_true)) continue;
+      if (!visible(seq->cam_from_world[i], j, &uv_true)) continue;
       // Fixed draws per visible point in each stream keep the streams aligned whatever the options.
       const double nu = noise_rng.Normal(), nv = noise_rng.Normal();
-      const bool outlier = pick_rng.Uniform() < options.outlier_fraction;
+      const bool outlier = pick_rng.Uniform() < outlier_fraction;
       SyntheticObservation o;
       o.feature_id = static_cast<int64_t>(j);
       o.uv_true_px = uv_true;
@@ -202,13 +206,12 @@ SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options) {
           o.uv_px = Eigen::Vector2d(pixel_rng.Uniform(0.0, cam.width - 1.0), pixel_rng.Uniform(0.0, cam.height - 1.0));
         } while ((o.uv_px - uv_true).norm() < kMinOutlierDistancePx);
       } else {
-        o.uv_px = uv_true + options.noise_px * Eigen::Vector2d(nu, nv);
+        o.uv_px = uv_true + noise_px * Eigen::Vector2d(nu, nv);
         if (!cam.InImage(o.uv_px)) continue;  // documented: dropped, not clamped
       }
       obs.push_back(o);
     }
   }
-  return seq;
 }
 
 std::vector<io::ObservationFrame> ToObservationFrames(const SyntheticSequence& sequence) {

@@ -13,7 +13,10 @@
 // At speed 1 and 30 fps (the defaults) the camera moves on average 1-3 cm and 0.3-1 deg a frame (at most
 // about 5 cm and 1.5 deg), and, with 400 points, sees about 150-200 points in every frame (never < 100).
 // The path is a function of speed * time: frame k at speed 2 is frame 2k at speed 1.
+#include <array>
+#include <cmath>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -24,6 +27,7 @@
 #include "io/observations_io.h"
 #include "io/ply.h"
 #include "io/trajectory_io.h"
+#include "sim/scene.h"
 
 namespace mcslam::sim {
 
@@ -70,6 +74,7 @@ struct SyntheticSequence {
   std::vector<Pose> cam_from_world;               // one per frame
   std::vector<double> stamps_s;                   // one per frame
   std::vector<SyntheticFrame> frames;             // one per frame
+  Scene scene;  // the world the points lie on, for rendering (sim/render.h)
 };
 
 // The paper's virtual camera: f = 500 px, 320x240, principal point at the image centre, no distortion.
@@ -89,6 +94,27 @@ bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, con
 // falls outside the image is DROPPED (a tracker would not report it), never clamped.
 // Throws std::invalid_argument (from options.Check()) on bad options.
 SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options);
+
+// A sinusoid of a camera path: amplitude * sin(2 pi t / period_s + phase), the phase drawn from the seed.
+struct PathWave {
+  double amplitude;
+  double period_s;
+  double phase = 0;
+  double At(double t) const { return amplitude * std::sin(2.0 * kPi * t / period_s + phase); }
+};
+
+// The paper's hand-held path about the box (the header comment above): cam_from_world at path time t
+// (seconds at speed 1), its phases from the seed. Other scenarios reuse it (faster, paused, turned).
+using PaperPathFunction = std::function<Pose(double t)>;
+PaperPathFunction MakePaperPath(uint64_t seed);
+
+// Fills sequence->frames (one per cam_from_world) with what the camera sees of sequence->points_in_world:
+// every point for which visible(cam_from_world, point index, &uv_true_px) is true is observed, noisy or an
+// outlier as MakePaperScenario documents, drawn from the seed's noise and outlier streams (the same streams
+// for every scenario). The visibility rule is the scenario's.
+using PointVisibility = std::function<bool(const Pose& cam_from_world, size_t point, Eigen::Vector2d* uv_true_px)>;
+void ObservePoints(double noise_px, double outlier_fraction, uint64_t seed, const PointVisibility& visible,
+                   SyntheticSequence* sequence);
 
 // Conversions to the io types, for writing files and for code that consumes io types (the SLAM runner).
 // Observation frames carry every frame, also those with no observation (index i, stamp stamps_s[i]).

@@ -1,9 +1,12 @@
 // `mcslam synth`: the files it writes, read back with the io readers, and its refusals of bad flags.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <sstream>
 #include <string>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "io/camera_io.h"
 #include "io/observations_io.h"
@@ -127,6 +130,59 @@ TEST(CliSynth, BadFlagsFailNamingTheFlag) {
   const auto r = RunMcslam("synth --scenario paper --frames 5");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
+}
+
+TEST(CliSynth, EveryScenarioWritesItsDefaultsAndOneSummaryLine) {
+  // name, default frames, camera width: each scenario's own defaults when no flag is given.
+  const struct {
+    const char* name;
+    int frames;
+    int width;
+  } kScenarios[] = {{"paper", 300, 320},  {"forward", 120, 620},     {"rotation", 270, 320}, {"planar", 300, 320},
+                    {"fast", 150, 320}, {"still-start", 300, 320}, {"sparse", 300, 320}};
+  for (const auto& s : kScenarios) {
+    TempDir tmp;
+    const std::string out = tmp / "seq";
+    const auto r = RunMcslam(std::string("synth --scenario ") + s.name + " --out " + out);
+    ASSERT_EQ(r.exit_code, 0) << s.name << "\n" << r.output;
+    // Exactly the summary line, in the format scripts parse.
+    EXPECT_EQ(r.output.rfind(std::string(s.name) + " scenario written to " + out + ": " + std::to_string(s.frames) +
+                                 " frames, ",
+                             0),
+              0u)
+        << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    EXPECT_EQ(io::ReadTum(out + "/groundtruth.txt").size(), static_cast<size_t>(s.frames)) << s.name;
+    EXPECT_EQ(io::ReadCameraYaml(out + "/camera.yaml").width, s.width) << s.name;
+    EXPECT_EQ(io::ReadObservations(out + "/observations.txt").size(), static_cast<size_t>(s.frames)) << s.name;
+  }
+}
+
+TEST(CliSynth, RenderedScenariosAreDeterministicPerSeed) {
+  TempDir tmp;
+  for (const std::string seed : {"2", "2", "3"}) {
+    const std::string dir = tmp / ("forward_" + seed + (std::filesystem::exists(tmp / ("forward_" + seed)) ? "b" : ""));
+    const auto r = RunMcslam("synth --scenario forward --frames 3 --render --seed " + seed + " --out " + dir);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const cv::Mat a = cv::imread(tmp / "forward_2/images/000002.png", cv::IMREAD_UNCHANGED);
+  const cv::Mat b = cv::imread(tmp / "forward_2b/images/000002.png", cv::IMREAD_UNCHANGED);
+  const cv::Mat c = cv::imread(tmp / "forward_3/images/000002.png", cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(a.cols, 620);
+  ASSERT_EQ(a.rows, 188);
+  EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(a, c, cv::NORM_L1), 0.0);
+  EXPECT_EQ(ReadText(tmp / "forward_2/observations.txt"), ReadText(tmp / "forward_2b/observations.txt"));
+  EXPECT_NE(ReadText(tmp / "forward_2/groundtruth.txt"), ReadText(tmp / "forward_3/groundtruth.txt"));
+}
+
+TEST(CliSynth, ScenarioOptionsThatDoNotFitAreRefusedNamingTheFlag) {
+  // forward's street is 160 m: at 1 m a frame, 161 frames; more runs off the world.
+  ExpectRefused("--scenario forward --frames 500", "--frames");
+  ExpectRefused("--scenario forward --speed 3", "--frames");  // its 120 default frames no longer fit
+  ExpectRefused("--scenario street", "--scenario");
+  TempDir tmp;
+  EXPECT_EQ(RunMcslam("synth --scenario forward --frames 300 --speed 0.5 --out " + tmp / "ok").exit_code, 0);
 }
 
 TEST(CliSynth, UnwritableOutputFolderFailsNamingIt) {

@@ -1,0 +1,236 @@
+// The scenario zoo (sim/scenarios.h): determinism, exact ground truth (observations are the projections of
+// unoccluded points, and what the renderer sees at their pixels), and the property that makes each scenario
+// what it is.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+#include <opencv2/imgproc.hpp>
+
+#include "core/median.h"
+#include "sim/render.h"
+#include "sim/scenarios.h"
+
+namespace mcslam::sim {
+namespace {
+
+SyntheticSequence Make(const std::string& name, uint64_t seed = 1) {
+  ScenarioOptions o;
+  o.name = name;
+  o.seed = seed;
+  return MakeScenario(o);
+}
+
+Eigen::Vector3d Center(const Pose& cam_from_world) { return cam_from_world.OriginOfTargetInSource(); }
+
+// Median over consecutive frame pairs of the image displacement of the points seen in both.
+double MedianDisplacementPx(const SyntheticSequence& seq) {
+  std::vector<double> d;
+  for (size_t i = 1; i < seq.frames.size(); ++i) {
+    std::map<int64_t, Eigen::Vector2d> previous;
+    for (const SyntheticObservation& o : seq.frames[i - 1].observations) previous[o.feature_id] = o.uv_true_px;
+    for (const SyntheticObservation& o : seq.frames[i].observations) {
+      const auto it = previous.find(o.feature_id);
+      if (it != previous.end()) d.push_back((o.uv_true_px - it->second).norm());
+    }
+  }
+  return Median(d);
+}
+
+class EveryScenario : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(EveryScenario, SameSeedSameSequenceOtherSeedAnother) {
+  const SyntheticSequence a = Make(GetParam(), 3), b = Make(GetParam(), 3), c = Make(GetParam(), 4);
+  ASSERT_EQ(a.frames.size(), b.frames.size());
+  ASSERT_EQ(a.points_in_world, b.points_in_world);
+  for (size_t i = 0; i < a.frames.size(); ++i) {
+    EXPECT_EQ(a.cam_from_world[i].q.coeffs(), b.cam_from_world[i].q.coeffs());
+    EXPECT_EQ(a.cam_from_world[i].t, b.cam_from_world[i].t);
+    ASSERT_EQ(a.frames[i].observations.size(), b.frames[i].observations.size());
+    for (size_t k = 0; k < a.frames[i].observations.size(); ++k)
+      EXPECT_EQ(a.frames[i].observations[k].uv_px, b.frames[i].observations[k].uv_px);
+  }
+  // Another seed: other points (and another path or layout).
+  EXPECT_NE(a.points_in_world, c.points_in_world);
+}
+
+TEST_P(EveryScenario, ObservationsAreExactProjectionsOfUnoccludedPoints) {
+  const SyntheticSequence seq = Make(GetParam());
+  const ScenarioInfo info = DescribeScenario(GetParam());
+  ASSERT_EQ(static_cast<int>(seq.frames.size()), info.frames);
+  ASSERT_EQ(static_cast<int>(seq.points_in_world.size()), info.num_points);
+  const QuadIntersector scene(seq.scene);
+  for (size_t i = 0; i < seq.frames.size(); i += 7) {
+    const Pose& pose = seq.cam_from_world[i];
+    const Eigen::Vector3d c = Center(pose);
+    for (const SyntheticObservation& o : seq.frames[i].observations) {
+      const Eigen::Vector3d& p = seq.points_in_world[static_cast<size_t>(o.feature_id)];
+      Eigen::Vector2d uv;
+      ASSERT_TRUE(seq.camera.ProjectWorld(pose, p, &uv));
+      EXPECT_EQ(o.uv_px, o.uv_true_px);  // noise 0
+      EXPECT_LT((uv - o.uv_px).norm(), 1e-9);
+      EXPECT_TRUE(seq.camera.InImage(o.uv_px));
+      // The first surface on the ray from the camera centre is the point's own: it is not hidden.
+      const auto hit = scene.Nearest(c, p - c, 0.0, 2.0);
+      ASSERT_TRUE(hit.has_value());
+      EXPECT_NEAR(hit->t, 1.0, 1e-9) << GetParam() << " frame " << i << " point " << o.feature_id;
+    }
+  }
+}
+
+TEST_P(EveryScenario, EveryFrameSeesEnoughPointsAndRendersTexture) {
+  const SyntheticSequence seq = Make(GetParam());
+  const bool sparse = GetParam() == "sparse";
+  for (const SyntheticFrame& f : seq.frames) {
+    if (sparse)
+      EXPECT_LT(f.observations.size(), 40u);
+    else
+      EXPECT_GE(f.observations.size(), 70u) << GetParam();
+  }
+  // A rendered frame: Shi-Tomasi as the front end runs it finds plenty of corners (sparse: few), and the
+  // renderer sees each observed point at its pixel.
+  RenderOptions ro;
+  ro.seed = 1;
+  const SceneRenderer renderer(seq.scene, ro);
+  const size_t k = seq.frames.size() / 2;
+  const cv::Mat img = renderer.Render(seq.camera, seq.cam_from_world[k], k);
+  ASSERT_EQ(img.cols, seq.camera.width);
+  ASSERT_EQ(img.rows, seq.camera.height);
+  cv::Mat mask = cv::Mat::zeros(img.size(), CV_8U);
+  mask(cv::Rect(12, 12, img.cols - 24, img.rows - 24)).setTo(255);
+  std::vector<cv::Point2f> corners;
+  cv::goodFeaturesToTrack(img, corners, 2000, 0.01, 10, mask, 3);
+  if (sparse)
+    EXPECT_LT(corners.size(), 40u);
+  else
+    EXPECT_GE(corners.size(), 100u) << GetParam();
+  for (const SyntheticObservation& o : seq.frames[k].observations) {
+    const auto hit = renderer.SurfacePoint(seq.camera, seq.cam_from_world[k], o.uv_true_px);
+    ASSERT_TRUE(hit.has_value());
+    EXPECT_LT((hit->point - seq.points_in_world[static_cast<size_t>(o.feature_id)]).norm(), 1e-6);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Zoo, EveryScenario, ::testing::ValuesIn(ScenarioNames()),
+                         [](const auto& param_info) {
+                           std::string name = param_info.param;
+                           std::replace(name.begin(), name.end(), '-', '_');
+                           return name;
+                         });
+
+TEST(Scenarios, PaperIsMakePaperScenario) {
+  const SyntheticSequence a = MakeScenario({.frames = 30, .noise_px = 1, .outlier_fraction = 0.1});
+  const SyntheticSequence b = MakePaperScenario({.frames = 30, .noise_px = 1, .outlier_fraction = 0.1});
+  ASSERT_EQ(a.frames.size(), b.frames.size());
+  for (size_t i = 0; i < a.frames.size(); ++i) {
+    EXPECT_EQ(a.cam_from_world[i].t, b.cam_from_world[i].t);
+    ASSERT_EQ(a.frames[i].observations.size(), b.frames[i].observations.size());
+    for (size_t k = 0; k < a.frames[i].observations.size(); ++k)
+      EXPECT_EQ(a.frames[i].observations[k].uv_px, b.frames[i].observations[k].uv_px);
+  }
+}
+
+TEST(Scenarios, ForwardDrivesAMetreAFrameAndTurnsNinetyDegrees) {
+  const SyntheticSequence seq = Make("forward");
+  EXPECT_EQ(seq.fps, 10.0);
+  EXPECT_EQ(seq.camera.width, 620);
+  std::vector<double> step;
+  for (size_t i = 1; i < seq.frames.size(); ++i)
+    step.push_back((Center(seq.cam_from_world[i]) - Center(seq.cam_from_world[i - 1])).norm());
+  EXPECT_NEAR(Median(step), 1.0, 0.1);
+  for (const Pose& p : seq.cam_from_world) EXPECT_NEAR(Center(p).z(), 1.6, 0.05);
+  // Heading: the camera's z axis, projected on the ground.
+  const auto heading = [](const Pose& cam_from_world) {
+    const Eigen::Vector3d z = cam_from_world.Inverse().R().col(2);
+    return std::atan2(z.y(), z.x());
+  };
+  const double turn_deg = RadToDeg(heading(seq.cam_from_world.back()) - heading(seq.cam_from_world.front()));
+  EXPECT_GE(turn_deg, 80.0);
+  EXPECT_LE(turn_deg, 100.0);
+}
+
+TEST(Scenarios, RotationHasPureRotationSegmentsAndARotatingStart) {
+  const SyntheticSequence seq = Make("rotation");
+  int in_segments = 0;
+  for (size_t i = 1; i < seq.frames.size(); ++i) {
+    const double t0 = seq.stamps_s[i - 1], t1 = seq.stamps_s[i];
+    for (const auto& [s, e] : kRotationPureSegmentsS) {
+      if (t0 < s || t1 > e) continue;
+      ++in_segments;
+      EXPECT_LT((Center(seq.cam_from_world[i]) - Center(seq.cam_from_world[i - 1])).norm(), 1e-3) << "frame " << i;
+    }
+  }
+  EXPECT_GE(in_segments, 40);  // 0.8 s and 1 s at 30 Hz
+  // The segments turn the camera by tens of degrees.
+  const auto frame_at = [&](double t) { return static_cast<size_t>(std::lround(t * seq.fps)); };
+  for (const auto& [s, e] : kRotationPureSegmentsS)
+    EXPECT_GT(AngularDistanceDeg(seq.cam_from_world[frame_at(s)].q, seq.cam_from_world[frame_at(e)].q), 30.0);
+  // The opening: mostly rotation (more than 15 deg) for little translation (under 2 cm).
+  const size_t opening_end = frame_at(kRotationOpeningS);
+  EXPECT_GT(AngularDistanceDeg(seq.cam_from_world[0].q, seq.cam_from_world[opening_end].q), 15.0);
+  EXPECT_LT((Center(seq.cam_from_world[0]) - Center(seq.cam_from_world[opening_end])).norm(), 0.02);
+}
+
+TEST(Scenarios, StillStartIsStillThenMoves) {
+  const SyntheticSequence seq = Make("still-start");
+  const size_t still_frames = static_cast<size_t>(kStillStartS * seq.fps);
+  for (size_t i = 1; i <= still_frames; ++i) {
+    EXPECT_EQ(seq.cam_from_world[i].t, seq.cam_from_world[0].t) << i;
+    EXPECT_EQ(seq.cam_from_world[i].q.coeffs(), seq.cam_from_world[0].q.coeffs()) << i;
+  }
+  // A second later it moves like the paper's camera (centimetres a frame).
+  const size_t k = still_frames + static_cast<size_t>(seq.fps);
+  EXPECT_GT((Center(seq.cam_from_world[k + 1]) - Center(seq.cam_from_world[k])).norm(), 0.005);
+}
+
+TEST(Scenarios, PlanarPointsAreOnOnePlane) {
+  const SyntheticSequence seq = Make("planar");
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : seq.points_in_world) mean += p;
+  mean /= static_cast<double>(seq.points_in_world.size());
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& p : seq.points_in_world) scatter += (p - mean) * (p - mean).transpose();
+  const Eigen::Vector3d normal = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors().col(0);
+  double worst = 0;
+  for (const Eigen::Vector3d& p : seq.points_in_world) worst = std::max(worst, std::abs(normal.dot(p - mean)));
+  EXPECT_LT(worst, 1e-3);
+  // The camera moves towards and away from the plane: distances vary by more than half a metre.
+  double near = 1e9, far = 0;
+  for (const Pose& pose : seq.cam_from_world) {
+    const double d = std::abs(normal.dot(Center(pose) - mean));
+    near = std::min(near, d), far = std::max(far, d);
+  }
+  EXPECT_GT(far - near, 0.5);
+}
+
+TEST(Scenarios, FastMovesTheImageMuchFasterThanPaper) {
+  const double paper = MedianDisplacementPx(Make("paper")), fast = MedianDisplacementPx(Make("fast"));
+  EXPECT_GT(fast, 8.0 * paper);
+  EXPECT_GE(fast, 20.0);
+  EXPECT_LE(fast, 40.0);
+}
+
+TEST(Scenarios, OptionsAreCheckedNamingTheField) {
+  ScenarioOptions o;
+  o.name = "cube";
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+  o.name = "forward";
+  EXPECT_EQ(o.MaxFrames(), 161);  // 160 m at 1 m a frame, both ends
+  o.frames = 162;
+  try {
+    o.Check();
+    ADD_FAILURE() << "162 frames of forward accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("frames"), std::string::npos) << e.what();
+  }
+  o.speed = 0.5;  // half as fast: twice the frames fit
+  EXPECT_NO_THROW(o.Check());
+}
+
+}  // namespace
+}  // namespace mcslam::sim
