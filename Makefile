@@ -6,7 +6,7 @@ JOBS ?= $(shell nproc)
 DEMO_OUT ?= out/demo
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench clean
+.PHONY: all deps configure build test test-portable demo bench clean
 
 all: build
 
@@ -24,8 +24,16 @@ test: build
 	@# ctest names skipped tests but not why: say once why the GPU tests skipped, if they did.
 	@ctest --test-dir $(BUILD) -R '^Cuda' --verbose 2>/dev/null | grep -m1 -o 'no CUDA device[^"]*' | sed 's/^/GPU tests skipped: /' || true
 
+# The same tests on a portable build (AVX2 + FMA, -march=x86-64-v3) instead of this CPU's widest vectors:
+# accuracy bounds must hold on any x86-64 machine, not only on the one that built the default.
+PORTABLE_BUILD ?= build-portable
+test-portable: deps
+	cmake -S . -B $(PORTABLE_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DMCSLAM_MARCH=x86-64-v3 -DMCSLAM_CUDA=OFF $(CMAKE_FLAGS)
+	cmake --build $(PORTABLE_BUILD) -j $(JOBS)
+	ctest --test-dir $(PORTABLE_BUILD) --output-on-failure -j $(JOBS) --timeout 900
+
 demo: build
 	bash scripts/demo.sh $(BUILD)/mcslam $(DEMO_OUT)
 
 clean:
-	rm -rf $(BUILD) out
+	rm -rf $(BUILD) $(PORTABLE_BUILD) out

@@ -25,16 +25,11 @@ run() {  # name, folder, flags...
   echo "$name: $summary"
 }
 
-# At 10 Hz forward (KITTI) and at 1 Hz (TUM) a track's look changes fast: one that no longer matches its birth
-# patch takes a new one rather than being dropped. On 7-Scenes the alignment with the birth patch does not
-# help (the error there is the scale drift), so it is off.
-run kitti06 kitti_odometry_06_frames000-050 --anchor-mismatch reanchor "$@"
+# Default settings only, nothing but the camera (one configuration for every input: docs/tuning.md says what
+# the system measures instead of being told).
+run kitti06 kitti_odometry_06_frames000-050 "$@"
 # 7-Scenes does not calibrate its colour camera; its camera-intrinsics.txt is the depth camera's (SOURCE.md).
 mkdir -p "$OUT"
 echo "525 525 320 240" > "$OUT/7scenes_camera.txt"
-# New points from 8 degrees of parallax; every point of the adjustment's window with a residual above 1 px
-# re-sampled (the hand-held tracks' median residual is about 1.2 px: at the paper's 2.5 px most points are never
-# refined, and the map's scale drifts with the depth errors they were born with).
-run 7scenes_redkitchen 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --min-parallax-deg 8 --anchor-every 0 --candidate-px 1 "$@"
-run 7scenes_redkitchen_default 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" --anchor-every 0 "$@"
-run tum_fr3_1hz tum_rgbd_fr3_long_office_household_1hz --anchor-mismatch reanchor "$@"
+run 7scenes_redkitchen 7scenes_redkitchen_frames000-299 --camera "$OUT/7scenes_camera.txt" "$@"
+run tum_fr3_1hz tum_rgbd_fr3_long_office_household_1hz "$@"

@@ -35,7 +35,6 @@ struct RunArgs {
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
   ImageJobOptions image;
-  std::set<std::string> given_flags;  // the flags set on the command line: image input keeps their values
 };
 
 
@@ -129,6 +128,13 @@ void RunFullSlam(const RunArgs& a) {
   j["keyframes"] = keyframes;
   j["map_points"] = res.map.points.size();
   j["initialised"] = res.initialised;
+  j["initialisation"] = nullptr;
+  j["initialisation_rejections"] = nlohmann::json::array();
+  for (const auto& r : res.reports) {
+    if (r.init_rejected) j["initialisation_rejections"].push_back({{"frame", r.index}, {"why", r.note}});
+    if (r.initialisation && !r.note.empty() && j["initialisation"].is_null())
+      j["initialisation"] = {{"frame", r.index}, {"note", r.note}};
+  }
   j["interrupted"] = Interrupted();
   j["frame_ms_median"] = UpperMedian(ms);
   j["fps"] = fps;
@@ -143,6 +149,9 @@ void RunFullSlam(const RunArgs& a) {
                          {"ate_rmse_m", err->ate_m.rmse},
                          {"trans_mean_m", err->ate_m.mean},
                          {"rot_mean_deg", err->rot_deg.mean},
+                         {"rot_median_deg", err->rot_deg.median},
+                         {"path_length_m", err->gt_path_length_m},
+                         {"mirrored", err->mirrored},
                          {"rpe_rot_mean_deg", err->rpe_rot_deg.mean}};
   }
   if (!res.reports.empty()) line += fmt::format(" final_reproj_mean_px={:.4f}", res.reports.back().reproj_mean_px);
@@ -153,15 +162,15 @@ void RunFullSlam(const RunArgs& a) {
   if (!res.initialised)
     throw std::runtime_error(fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
-        "move by a median of {} px with enough parallax between two frames",
-        res.reports.size(), a.out, options.init.min_median_displacement_px));
+        "move by a median of {} deg with enough parallax between two frames",
+        res.reports.size(), a.out, options.init.min_median_motion_deg));
 }
 
 void Run(const RunArgs& a) {
   if (!a.known_map && IsImageInput(a.input, a.image)) {
     ImageJobOptions image = a.image;
     image.gt_scale = a.gt_scale;
-    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, image, a.given_flags);
+    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, image);
     return;
   }
   if (!a.known_map) return RunFullSlam(a);
@@ -250,10 +259,10 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--init-method", args->init_method, "Essential matrix: 8point (normalised 8-point + RANSAC + LM) or 5point (OpenCV)")
       ->check(CLI::IsMember({"8point", "5point"}))
       ->capture_default_str();
-  cmd->add_option("--init-displacement-px", args->system.init.min_median_displacement_px,
-                  "Median feature displacement that starts the initialisation (image input: scaled by f / 500 px "
-                  "unless given)")
-      ->check(CLI::PositiveNumber)
+  cmd->add_option("--init-motion-deg", args->system.init.min_median_motion_deg,
+                  "Median feature motion (angle between a feature's rays in two frames) that starts the "
+                  "initialisation")
+      ->check(CLI::Range(1e-6, 89.0))
       ->capture_default_str();
   cmd->add_option("--pose", args->pose_method, "Pose step: mc (Monte Carlo, the paper) or pnp (RANSAC PnP + LM, baseline)")
       ->check(CLI::IsMember({"mc", "pnp"}))
@@ -305,18 +314,22 @@ void RegisterRun(CLI::App& app) {
                   "Smallest parallax for a new point (largest angle between its viewing rays)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--new-point-depth-noise", args->system.mapping.max_relative_depth_noise,
+                  "New points also need the parallax at which the tracks' measured noise gives at most this "
+                  "relative depth error (capped at --max-noise-parallax-deg)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--max-noise-parallax-deg", args->system.mapping.max_noise_parallax_deg,
+                  "Cap of the parallax the tracks' noise asks of new points (0: only --min-parallax-deg)")
+      ->check(CLI::Range(0.0, 89.0))
+      ->capture_default_str();
   cmd->add_option("--smooth-alpha", args->smooth_alpha, "DESP smoothing weight of the new pose, (0, 1]")
       ->check(CLI::Range(1e-6, 1.0))
       ->capture_default_str();
   args->pose.Add(cmd);
   AddBackendFlag(cmd, &args->backend);
   AddImageJobFlags(cmd, &args->image);
-  cmd->callback([args, cmd] {
-    for (const CLI::Option* o : cmd->get_options())
-      if (o->count() > 0)
-        for (const std::string& name : o->get_lnames()) args->given_flags.insert("--" + name);
-    Run(*args);
-  });
+  cmd->callback([args] { Run(*args); });
 }
 
 }  // namespace mcslam::apps

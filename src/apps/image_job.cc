@@ -42,11 +42,6 @@ using Clock = std::chrono::steady_clock;
 
 double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
-// The camera the back end's pixel defaults were tuned with (the paper's: f = 500 px at 320x240).
-constexpr double kTunedFocalPx = 500.0;
-// Image input defaults (ImageInputDefaults says why).
-constexpr double kImageInitParallaxDeg = 3.0;
-constexpr double kImageSigmaRotDeg = 0.5;
 // Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
 // of the corners in its window, and a point lost long ago is rarely found again.
 constexpr size_t kMaxRemapRequests = 200;
@@ -459,10 +454,13 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
       ->capture_default_str();
   cmd->add_option_function<std::string>(
          "--anchor-mismatch",
-         [o](const std::string& v) { o->frontend.anchor_reanchor_on_mismatch = v == "reanchor"; },
+         [o](const std::string& v) {
+           using AM = frontend::FrontendOptions::AnchorMismatch;
+           o->frontend.anchor_mismatch = v == "drop" ? AM::kDrop : v == "reanchor" ? AM::kReanchor : AM::kAuto;
+         },
          "Front end: a track that no longer matches its birth patch is dropped (drop), or keeps going with a new "
-         "patch (reanchor: fast forward motion such as KITTI's) [default: drop]")
-      ->check(CLI::IsMember({"drop", "reanchor"}));
+         "patch (reanchor), or, per frame, the one or the other by how many tracks mismatch (auto) [default: auto]")
+      ->check(CLI::IsMember({"auto", "drop", "reanchor"}));
 }
 
 bool IsImageInput(const std::string& input, const ImageJobOptions& options) {
@@ -471,21 +469,10 @@ bool IsImageInput(const std::string& input, const ImageJobOptions& options) {
   return !fs::is_regular_file(fs::path(input) / "observations.txt", ec);
 }
 
-slam::SystemOptions ImageInputDefaults(slam::SystemOptions options, const PinholeCamera& camera,
-                                       const std::set<std::string>& given_flags) {
-  auto given = [&](const char* flag) { return given_flags.count(flag) > 0; };
-  if (!given("--init-displacement-px"))
-    options.init.min_median_displacement_px *= 0.5 * (camera.fx + camera.fy) / kTunedFocalPx;
-  if (!given("--init-parallax-deg")) options.init.min_median_parallax_deg = kImageInitParallaxDeg;
-  if (!given("--sigma-rot-deg")) options.tracker.sigma_rot_deg = kImageSigmaRotDeg;
-  return options;
-}
-
 // ---- the job ---------------------------------------------------------------------------------------------
 
 ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir, const slam::SystemOptions& system_in,
-                            const std::string& backend, const ImageJobOptions& options,
-                            const std::set<std::string>& given_flags) {
+                            const std::string& backend, const ImageJobOptions& options) {
   options.Check();
   // ---- everything that can be checked before any work ----
   io::DatasetOptions dopt;
@@ -531,7 +518,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     throw std::invalid_argument(fmt::format("--end {} is out of range: {} has {} frames (0..{})", options.end,
                                             data.source->Description(), *count, *count - 1));
 
-  slam::SystemOptions sys_opts = options.image_defaults ? ImageInputDefaults(system_in, camera, given_flags) : system_in;
+  slam::SystemOptions sys_opts = system_in;
   sys_opts.Check();
   auto pose_kernel = MakePoseKernelFor(backend);
   auto point_kernel = MakePointKernelFor(backend);
@@ -567,11 +554,11 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
 
   const int64_t last = options.end >= 0 ? options.end : (count ? *count - 1 : -1);
   spdlog::info("{}: {} camera {} ({}); frames {}..{}; {} hypotheses/frame, {} samples/point, backend {}; "
-               "initialisation after a median displacement of {:.1f} px and a median parallax of {:.1f} deg; rotation "
+               "initialisation after a median feature motion of {:.2f} deg and a median parallax of {:.1f} deg; rotation "
                "samples {:.2f} deg; new points from {:.1f} deg of parallax",
                data.source->Description(), io::ToString(data.kind), camera.ToString(), data.camera_origin,
                options.start, last >= 0 ? fmt::format("{}", last) : std::string("end"), sys_opts.tracker.hypotheses,
-               sys_opts.mapping.samples, backend, sys_opts.init.min_median_displacement_px,
+               sys_opts.mapping.samples, backend, sys_opts.init.min_median_motion_deg,
                sys_opts.init.min_median_parallax_deg, sys_opts.tracker.sigma_rot_deg, sys_opts.mapping.min_parallax_deg);
   if (gt) spdlog::info("ground truth: {} poses from {}", gt->size(), gt_origin);
 
@@ -584,6 +571,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::optional<Pose> latest_cam_from_world;
   std::optional<int64_t> init_frame;
   std::string init_note, failure;
+  nlohmann::json init_rejections = nlohmann::json::array();  // initialisations found and refused, and why
   int tracked = 0, lost = 0;
   bool was_lost = false;
   bool skipped_since_processed = false;  // frames were skipped since the last one processed
@@ -704,6 +692,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         }
         tracked += r.status == slam::FrameStatus::kTracked;
         lost += r.status == slam::FrameStatus::kLost;
+        if (r.init_rejected) init_rejections.push_back({{"frame", r.index}, {"why", r.note}});
         if (r.initialisation && !r.note.empty() && !init_frame) {
           init_frame = r.index;
           init_note = r.note;
@@ -857,7 +846,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                   {"rounds", sys_opts.tracker.rounds},
                   {"seed", sys_opts.seed},
                   {"samples_per_point", sys_opts.mapping.samples},
-                  {"init_min_median_displacement_px", sys_opts.init.min_median_displacement_px},
+                  {"init_min_median_motion_deg", sys_opts.init.min_median_motion_deg},
                   {"init_min_median_parallax_deg", sys_opts.init.min_median_parallax_deg},
                   {"sigma_rot_deg", sys_opts.tracker.sigma_rot_deg},
                   {"new_point_min_parallax_deg", sys_opts.mapping.min_parallax_deg},
@@ -876,6 +865,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   j["map_points"] = sum.map_points;
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);
+  j["initialisation_rejections"] = init_rejections;
   j["interrupted"] = interrupted;
   AddRunTimes(times, &j);
   j["fps"] = sum.fps;
@@ -934,6 +924,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                          {"scale", errors->alignment_result.gt_world_from_est_world.scale},
                          // Positions (nearly) on a line leave the rotation about it free: rot_deg then means little.
                          {"rotation_ambiguous", errors->alignment_result.rotation_ambiguous},
+                         {"path_length_m", errors->gt_path_length_m},
+                         {"mirrored", errors->mirrored},
                          {"ate_m", StatsJson(errors->ate_m)},
                          {"rot_deg", StatsJson(errors->rot_deg)},
                          {"rpe_delta", errors->rpe_delta},
@@ -979,8 +971,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   if (!sum.initialised)
     throw std::runtime_error(fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "
-        "median of {:.1f} px with a median parallax of {:.1f} deg between two frames (last: {})",
-        frames_processed, out_dir, sys_opts.init.min_median_displacement_px, sys_opts.init.min_median_parallax_deg,
+        "median of {:.2f} deg with a median parallax of {:.1f} deg between two frames (last: {})",
+        frames_processed, out_dir, sys_opts.init.min_median_motion_deg, sys_opts.init.min_median_parallax_deg,
         reports.empty() ? std::string("no frame") : reports.back().note));
   return sum;
 }

@@ -32,9 +32,6 @@ struct ImageJobOptions {
   // After a lost frame, each frame's features are matched by their SIFT descriptors to the map points whose
   // tracks ended, and a pose that enough of them agree with (RANSAC PnP) restarts the tracking there.
   bool relocalise = true;
-  // The back end's defaults are tuned on the paper's synthetic sequence (320x240, f = 500 px, 1 px noise).
-  // For image input the job replaces a few of them (see ImageInputDefaults) unless the user set them.
-  bool image_defaults = true;
   frontend::FrontendOptions frontend;
   // Throws std::invalid_argument naming the flag.
   void Check() const;
@@ -46,18 +43,6 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* options);
 // True when `input` is to be run by the image job: a --dataset other than auto was given, or the input is
 // not a folder of observations (no observations.txt in it).
 bool IsImageInput(const std::string& input, const ImageJobOptions& options);
-
-// The System's options for real frames seen by `camera`, for every field whose flag is not in `given_flags`
-// ("--init-displacement-px", ...):
-//   --init-displacement-px  20 px * f / 500 px: it stands for an angle (2.3 degrees), so it scales with f;
-//   --init-parallax-deg     3 degrees: the back end asks 5 for its synthetic 1 px noise; tracked features are
-//                           quieter, and a forward-moving car (KITTI) loses its shared features before 5;
-//   --sigma-rot-deg         0.5 degrees per frame: the spread of the rotation samples; real sequences at 10-30 Hz
-//                           turn less than 1 degree a frame, and a tighter spread leaves more hypotheses near
-//                           the answer (KITTI 06: ATE 5-29 cm over seeds at 1 degree, 5-8 cm at 0.5).
-// Residual thresholds stay in pixels: the tracking noise is in pixels whatever the resolution.
-slam::SystemOptions ImageInputDefaults(slam::SystemOptions options, const PinholeCamera& camera,
-                                       const std::set<std::string>& given_flags);
 
 struct ImageJobSummary {
   int64_t frames = 0;  // processed (skipped ones not counted)
@@ -72,9 +57,9 @@ struct ImageJobSummary {
 // std::invalid_argument with a message naming the file, flag or value for bad input (before any frame is
 // processed where it can be known before), and after writing the outputs when the sequence never
 // initialised or the user interrupted it.
-// `given_flags`: the flags the user set (long names with "--"), which keep their values (ImageInputDefaults).
+// The System's options are the same for every input (one default configuration): what differs between inputs
+// is measured by the system itself.
 ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir, const slam::SystemOptions& system,
-                            const std::string& backend, const ImageJobOptions& options,
-                            const std::set<std::string>& given_flags);
+                            const std::string& backend, const ImageJobOptions& options);
 
 }  // namespace mcslam::apps

@@ -18,7 +18,14 @@ void PoseFlags::Add(CLI::App* cmd) {
                   "Sampling rounds per frame at the same total budget (1 = the paper's one-shot sampling; 3 measured better, docs/pose_estimation.md)")
       ->check(CLI::Range(1, 16))
       ->capture_default_str();
-  cmd->add_option("--sigma-rot-deg", tracker.sigma_rot_deg, "Std of the rotation hypotheses per axis, degrees")
+  cmd->add_option("--sigma-rot-deg", tracker.sigma_rot_deg,
+                  "Std of the rotation hypotheses per axis, degrees: the least spread (it grows with the measured "
+                  "rotation of the last frame, --sigma-rot-motion)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--sigma-rot-motion", tracker.sigma_rot_motion_scale,
+                  "The rotation spread is at least this times the last frame's measured rotation (0: the paper's "
+                  "fixed spread)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--sigma-trans-floor", tracker.sigma_trans_floor_m, "Floor of the translation spread, metres")

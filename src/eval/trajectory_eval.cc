@@ -201,6 +201,32 @@ ErrorStats ComputeStats(std::vector<double> errors) {
   return s;
 }
 
+namespace {
+
+// True when the least-squares affine map from `from` onto `to` has a negative determinant, with both point
+// sets spread in 3D (the smallest singular value of each centred set at least 5 % of the largest, so that the
+// sign is not decided by noise).
+bool LinearFitIsReflection(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to) {
+  const size_t n = from.size();
+  if (n < 4 || to.size() != n) return false;
+  Eigen::Vector3d mf = Eigen::Vector3d::Zero(), mt = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < n; ++i) mf += from[i], mt += to[i];
+  mf /= static_cast<double>(n), mt /= static_cast<double>(n);
+  Eigen::Matrix3d cff = Eigen::Matrix3d::Zero(), ctf = Eigen::Matrix3d::Zero(), ctt = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d f = from[i] - mf, t = to[i] - mt;
+    cff += f * f.transpose(), ctf += t * f.transpose(), ctt += t * t.transpose();
+  }
+  constexpr double kMinSpread = 0.05;
+  for (const Eigen::Matrix3d* c : {&cff, &ctt}) {
+    const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(*c).singularValues();  // variances
+    if (!(std::sqrt(sv[2]) >= kMinSpread * std::sqrt(sv[0]))) return false;
+  }
+  return (ctf * cff.inverse()).determinant() < 0;
+}
+
+}  // namespace
+
 TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajectory& est, const EvalOptions& options) {
   options.Check();
   if (gt.empty()) throw std::runtime_error("eval: the ground-truth trajectory has no poses");
@@ -259,6 +285,8 @@ TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajecto
   }
   out.ate_m = ComputeStats(trans_errors);
   out.rot_deg = ComputeStats(rot_errors);
+  for (size_t k = 1; k < gt_positions.size(); ++k) out.gt_path_length_m += (gt_positions[k] - gt_positions[k - 1]).norm();
+  out.mirrored = out.rot_deg.median > 90.0 || LinearFitIsReflection(est_positions, gt_positions);
 
   // RPE: error of the estimated motion between matched poses k and k + delta, (gt_k^-1 gt_j)^-1 (est_k^-1 est_j).
   std::vector<double> rpe_trans, rpe_rot;

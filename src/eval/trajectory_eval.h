@@ -112,6 +112,12 @@ struct TrajectoryErrors {
   int rpe_delta = 1;
   ErrorStats rpe_trans_m;  // of the relative pose error, on the aligned (for Sim(3): scaled) estimate
   ErrorStats rpe_rot_deg;
+  double gt_path_length_m = 0;  // length of the ground-truth path through the matched poses
+  // The estimate is a mirror image of the truth (a depth-reversed monocular map): the least-squares linear
+  // map from the estimated positions onto the true ones has a negative determinant (positions spread in 3D),
+  // or the orientations are more than 90 degrees off after the alignment (median), which no proper rotation
+  // of a mirrored trajectory can undo.
+  bool mirrored = false;
   size_t matched() const { return frames.size(); }
 };
 

@@ -211,6 +211,8 @@ void FrontendOptions::Check() const {
   if (retry_pyramid_levels < 0 || retry_pyramid_levels > 8)
     fail(fmt::format("retry_pyramid_levels must be in [0, 8] (got {})", retry_pyramid_levels));
   if (anchor_every < 0) fail(fmt::format("anchor_every must be >= 0 (got {})", anchor_every));
+  if (!(anchor_auto_reanchor_fraction >= 0 && anchor_auto_reanchor_fraction <= 1))
+    fail(fmt::format("anchor_auto_reanchor_fraction must be in [0, 1] (got {})", anchor_auto_reanchor_fraction));
   if (anchor_patch_px < 7 || anchor_patch_px % 2 == 0)
     fail(fmt::format("anchor_patch_px must be odd and >= 7 (got {})", anchor_patch_px));
   if (!(anchor_min_correlation > -1 && anchor_min_correlation < 1))
@@ -414,7 +416,7 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
 
   // Alignment with the birth patches (each track on its own: in parallel, the result independent of the order).
   const auto t_anchor = Clock::now();
-  std::vector<uint8_t> reanchor(n, 0), aligned_ok(n, 0);
+  std::vector<uint8_t> reanchor(n, 0), aligned_ok(n, 0), mismatch(n, 0);
   std::vector<float> anchor_shift(n, 0.0f);
   if (o.anchor_every > 0) {
     std::vector<size_t> due;
@@ -426,11 +428,7 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       const AnchorOutcome a = AlignWithAnchor(gray, tracks[i].anchor, p1[i], o, &aligned, &tracks[i].anchor_linear);
       if (a == AnchorOutcome::kNotAligned) return;  // too near the edge: the LK position stands this frame
       if (a == AnchorOutcome::kMismatch) {
-        // Either the track goes, or it stays where LK put it and takes a new patch there.
-        if (o.anchor_reanchor_on_mismatch)
-          reanchor[i] = 1;
-        else
-          outcome[i] = kAnchor;
+        mismatch[i] = 1;  // decided below, from the frame's count
         return;
       }
       if (a == AnchorOutcome::kReanchor) reanchor[i] = 1;
@@ -439,6 +437,16 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       p1[i] = aligned;
     });
   }
+  // A mismatched track goes, or stays where LK put it and takes a new patch there (FrontendOptions::anchor_mismatch).
+  const int mismatches = static_cast<int>(std::count(mismatch.begin(), mismatch.end(), 1));
+  const int aligned_count = static_cast<int>(std::count(aligned_ok.begin(), aligned_ok.end(), 1)) + mismatches;
+  using AM = FrontendOptions::AnchorMismatch;
+  const bool keep_mismatched =
+      o.anchor_mismatch == AM::kReanchor ||
+      (o.anchor_mismatch == AM::kAuto && mismatches > o.anchor_auto_reanchor_fraction * aligned_count);
+  for (size_t i = 0; i < n; ++i)
+    if (mismatch[i] && keep_mismatched) reanchor[i] = 1;
+    else if (mismatch[i]) outcome[i] = kAnchor;
   st.anchor_ms = MsSince(t_anchor);
   double sum_shift = 0;
 

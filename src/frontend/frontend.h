@@ -55,10 +55,15 @@ struct FrontendOptions {
   double anchor_min_correlation = 0.9;   // normalised correlation below this: a mismatch
   double anchor_max_shift_px = 2.0;      // alignment moving the track further than this from LK: a mismatch
   // On a mismatch the track is dropped (a corner on an outline, an occluded point: the rendered scene's
-  // tracks stay within 0.1 px of their scene point), or, with this set, it keeps its LK position and takes a
-  // new patch there (fast forward motion, KITTI at 10 Hz: a tenth of the tracks change look that much in one
-  // frame, and dropping them all starves the initialisation).
-  bool anchor_reanchor_on_mismatch = false;
+  // tracks stay within 0.1 px of their scene point), or it keeps its LK position and takes a new patch there
+  // (fast forward motion, KITTI at 10 Hz: a tenth of the tracks change look that much in one frame, and
+  // dropping them all starves the initialisation). kAuto decides per frame from what it measures: when more
+  // than anchor_auto_reanchor_fraction of the tracks aligned in a frame mismatch, the scene's look is changing
+  // faster than birth patches can follow (forward motion, fast turns, blur) and that frame's mismatches take
+  // new patches; a few mismatches are the occlusions and slid tracks that the check is there to drop.
+  enum class AnchorMismatch { kAuto, kDrop, kReanchor };
+  AnchorMismatch anchor_mismatch = AnchorMismatch::kAuto;
+  double anchor_auto_reanchor_fraction = 0.05;
   double anchor_max_scale_change = 1.5;  // the warp grew or shrank the patch more (or sheared it as much):
                                          // a new patch is taken where the track is now
   // A patch whose structure tensor is this far from isotropic (smallest over largest eigenvalue) holds little

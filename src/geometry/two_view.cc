@@ -277,11 +277,57 @@ int CountInFront(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv
   return count;
 }
 
-// Fraction of the correspondences in `idx` that one homography (cv::findHomography, RANSAC, then its LM
-// refinement) maps within kHomographyThresholdFactor * threshold of their match in view 2.
-double HomographyInlierRatio(std::span<const Eigen::Vector2d> uv1, std::span<const Eigen::Vector2d> uv2,
-                             const std::vector<int>& idx, double threshold, double confidence) {
-  if (idx.size() < 4) return 0.0;
+// Step 5 of EstimateTwoView and of the planar path: linear triangulation of the inliers at res->cam2_from_cam1,
+// with the parallax and count checks. On a failure fills res->status and res->failure and returns false.
+bool TriangulateInliers(std::span<const Eigen::Vector2d> uv_norm1, std::span<const Eigen::Vector2d> uv_norm2,
+                        const std::vector<int>& inlier_idx, const TwoViewOptions& options, TwoViewResult* res) {
+  TriangulationOptions tri;
+  tri.focal_px = options.focal_px;
+  tri.max_reprojection_px = options.max_reprojection_px;
+  tri.min_parallax_deg = options.min_parallax_deg;
+  const std::array<Pose, 2> poses = {Pose::Identity(), res->cam2_from_cam1};
+  std::vector<double> parallaxes;
+  parallaxes.reserve(inlier_idx.size());
+  for (const int i : inlier_idx) {
+    const std::array<Eigen::Vector2d, 2> obs = {uv_norm1[i], uv_norm2[i]};
+    const Triangulation t = TriangulateDlt(poses, obs, tri);
+    if (t.status == TriangulationStatus::kOk || t.status == TriangulationStatus::kLargeReprojection ||
+        t.status == TriangulationStatus::kSmallParallax)
+      parallaxes.push_back(t.parallax_deg);
+    if (t.ok) {
+      res->triangulated[i] = 1;
+      res->points_in_cam1[i] = t.point_in_world;
+      ++res->num_triangulated;
+    }
+  }
+  res->median_parallax_deg = Median(parallaxes);
+  auto fail = [&](TwoViewStatus status, std::string why) {
+    res->ok = false;
+    res->status = status;
+    res->failure = std::move(why);
+    return false;
+  };
+  if (!parallaxes.empty() && res->median_parallax_deg < options.min_parallax_deg)
+    return fail(TwoViewStatus::kSmallParallax,
+                fmt::format("median parallax {:.3g} deg < {:.3g} deg: the baseline is too short for the scene depth",
+                            res->median_parallax_deg, options.min_parallax_deg));
+  if (res->num_triangulated < options.min_triangulated)
+    return fail(TwoViewStatus::kTooFewTriangulated,
+                fmt::format("only {} of {} inliers triangulate with positive depth, reprojection <= {} px and "
+                            "parallax >= {} deg (need {})",
+                            res->num_triangulated, res->num_inliers, options.max_reprojection_px,
+                            options.min_parallax_deg, options.min_triangulated));
+  return true;
+}
+
+// cv::findHomography (RANSAC, then its LM refinement) on the correspondences `idx`, in normalised coordinates;
+// nullopt when none could be fitted. `mask` (per correspondence of the whole input, when given): within
+// kHomographyThresholdFactor * threshold of the refined homography's transfer.
+std::optional<Eigen::Matrix3d> FitHomography(std::span<const Eigen::Vector2d> uv1, std::span<const Eigen::Vector2d> uv2,
+                                             const std::vector<int>& idx, double threshold, double confidence,
+                                             std::vector<uint8_t>* mask, int* count) {
+  *count = 0;
+  if (idx.size() < 4) return std::nullopt;
   std::vector<cv::Point2d> p1, p2;
   for (const int i : idx) {
     p1.emplace_back(uv1[i].x(), uv1[i].y());
@@ -293,18 +339,30 @@ double HomographyInlierRatio(std::span<const Eigen::Vector2d> uv1, std::span<con
     constexpr int kHomographyIterations = 2000;  // cheap next to the E RANSAC; enough at >= 50 % H-inliers
     h = cv::findHomography(p1, p2, cv::RANSAC, h_threshold, cv::noArray(), kHomographyIterations, confidence);
   } catch (const cv::Exception&) {
-    return 0.0;  // no homography could be fitted: nothing suggests degeneracy
+    return std::nullopt;
   }
-  if (h.empty()) return 0.0;
+  if (h.empty()) return std::nullopt;
   // OpenCV's mask is that of its best minimal sample, before its final refinement; count the inliers of the
   // refined homography instead, which fits a truly planar scene to the noise level.
   const Eigen::Matrix3d hm = ToEigen3(h);
-  int count = 0;
+  if (mask) mask->assign(uv1.size(), 0);
   for (size_t k = 0; k < p1.size(); ++k) {
     const Eigen::Vector3d x2 = hm * Eigen::Vector3d(p1[k].x, p1[k].y, 1.0);
-    if (std::abs(x2.z()) > 1e-12 && (x2.head<2>() / x2.z() - Eigen::Vector2d(p2[k].x, p2[k].y)).norm() < h_threshold)
-      ++count;
+    if (std::abs(x2.z()) > 1e-12 && (x2.head<2>() / x2.z() - Eigen::Vector2d(p2[k].x, p2[k].y)).norm() < h_threshold) {
+      ++*count;
+      if (mask) (*mask)[idx[k]] = 1;
+    }
   }
+  return hm;
+}
+
+// Fraction of the correspondences in `idx` that one homography (FitHomography) maps within
+// kHomographyThresholdFactor * threshold of their match in view 2; 0 when none could be fitted (nothing then
+// suggests degeneracy).
+double HomographyInlierRatio(std::span<const Eigen::Vector2d> uv1, std::span<const Eigen::Vector2d> uv2,
+                             const std::vector<int>& idx, double threshold, double confidence) {
+  int count = 0;
+  if (!FitHomography(uv1, uv2, idx, threshold, confidence, nullptr, &count)) return 0.0;
   return static_cast<double>(count) / static_cast<double>(idx.size());
 }
 
@@ -460,40 +518,60 @@ TwoViewResult EstimateTwoView(std::span<const Eigen::Vector2d> uv_norm1, std::sp
                             best, runner_up, res.num_inliers));
 
   // 5. Structure.
-  TriangulationOptions tri;
-  tri.focal_px = options.focal_px;
-  tri.max_reprojection_px = options.max_reprojection_px;
-  tri.min_parallax_deg = options.min_parallax_deg;
-  const std::array<Pose, 2> poses = {Pose::Identity(), pose};
-  std::vector<double> parallaxes;
-  parallaxes.reserve(inlier_idx.size());
-  for (const int i : inlier_idx) {
-    const std::array<Eigen::Vector2d, 2> obs = {uv_norm1[i], uv_norm2[i]};
-    const Triangulation t = TriangulateDlt(poses, obs, tri);
-    if (t.status == TriangulationStatus::kOk || t.status == TriangulationStatus::kLargeReprojection ||
-        t.status == TriangulationStatus::kSmallParallax)
-      parallaxes.push_back(t.parallax_deg);
-    if (t.ok) {
-      res.triangulated[i] = 1;
-      res.points_in_cam1[i] = t.point_in_world;
-      ++res.num_triangulated;
-    }
-  }
-  res.median_parallax_deg = Median(parallaxes);
-  if (!parallaxes.empty() && res.median_parallax_deg < options.min_parallax_deg)
-    return fail(TwoViewStatus::kSmallParallax,
-                fmt::format("median parallax {:.3g} deg < {:.3g} deg: the baseline is too short for the scene depth",
-                            res.median_parallax_deg, options.min_parallax_deg));
-  if (res.num_triangulated < options.min_triangulated)
-    return fail(TwoViewStatus::kTooFewTriangulated,
-                fmt::format("only {} of {} inliers triangulate with positive depth, reprojection <= {} px and "
-                            "parallax >= {} deg (need {})",
-                            res.num_triangulated, res.num_inliers, options.max_reprojection_px,
-                            options.min_parallax_deg, options.min_triangulated));
+  if (!TriangulateInliers(uv_norm1, uv_norm2, inlier_idx, options, &res)) return res;
   res.ok = true;
   res.status = TwoViewStatus::kOk;
   res.failure.clear();
   return res;
+}
+
+std::vector<TwoViewResult> EstimateTwoViewPlanar(std::span<const Eigen::Vector2d> uv_norm1,
+                                                 std::span<const Eigen::Vector2d> uv_norm2,
+                                                 const TwoViewOptions& options) {
+  options.Check();
+  std::vector<TwoViewResult> out;
+  const int n = static_cast<int>(uv_norm1.size());
+  if (uv_norm2.size() != uv_norm1.size() || n < 4) return out;
+  for (int i = 0; i < n; ++i)
+    if (!uv_norm1[i].allFinite() || !uv_norm2[i].allFinite()) return out;
+  std::vector<int> all(n);
+  for (int i = 0; i < n; ++i) all[i] = i;
+  const double threshold = options.ransac_threshold_px / options.focal_px;
+  std::vector<uint8_t> mask;
+  int count = 0;
+  const std::optional<Eigen::Matrix3d> h = FitHomography(uv_norm1, uv_norm2, all, threshold, options.confidence, &mask, &count);
+  if (!h || count < options.min_inliers) return out;
+  const std::vector<int> inlier_idx = Indices(mask);
+  // Faugeras' decomposition (as OpenCV implements it, Malis & Vargas 2007) with K = I: up to four (R, t/d, n).
+  std::vector<cv::Mat> rotations, translations, normals;
+  cv::Mat h_cv(3, 3, CV_64F);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) h_cv.at<double>(r, c) = (*h)(r, c);
+  try {
+    cv::decomposeHomographyMat(h_cv, cv::Mat::eye(3, 3, CV_64F), rotations, translations, normals);
+  } catch (const cv::Exception&) {
+    return out;
+  }
+  for (size_t k = 0; k < rotations.size(); ++k) {
+    const Eigen::Vector3d t(translations[k].at<double>(0), translations[k].at<double>(1), translations[k].at<double>(2));
+    // No translation: a pure rotation, which says nothing of the structure.
+    if (!(t.norm() > 1e-9) || !t.allFinite()) continue;
+    TwoViewResult res;
+    res.inliers = mask;
+    res.num_inliers = count;
+    res.triangulated.assign(n, 0);
+    res.points_in_cam1.assign(n, Eigen::Vector3d::Zero());
+    res.homography_inlier_ratio = 1.0;
+    res.cam2_from_cam1 = Pose::FromRotationTranslation(ToEigen3(rotations[k]), t.normalized());
+    res.essential = EssentialFromPose(res.cam2_from_cam1);
+    // The plane's side: most inliers triangulated in front of both cameras (two of the four solutions fail).
+    if (CountInFront(res.cam2_from_cam1, uv_norm1, uv_norm2, inlier_idx) < count / 2) continue;
+    if (!TriangulateInliers(uv_norm1, uv_norm2, inlier_idx, options, &res)) continue;
+    res.ok = true;
+    res.status = TwoViewStatus::kOk;
+    out.push_back(std::move(res));
+  }
+  return out;
 }
 
 }  // namespace mcslam::geometry

@@ -111,4 +111,15 @@ struct TwoViewResult {
 TwoViewResult EstimateTwoView(std::span<const Eigen::Vector2d> uv_norm1, std::span<const Eigen::Vector2d> uv_norm2,
                               const TwoViewOptions& options);
 
+// The planar path: when a homography explains the correspondences (a dominant plane, where EstimateTwoView
+// refuses: kPlanarOrRotation), the homography (RANSAC with the threshold EstimateTwoView's degeneracy test
+// uses) is decomposed into its motions (Faugeras; cv::decomposeHomographyMat with K = I), and each motion that
+// puts at least half of the homography's inliers in front of both cameras is triangulated as in step 5 of
+// EstimateTwoView (with its checks). Returns the solutions that pass, usually two for a plane seen from one
+// side (the two-fold ambiguity of a plane: more views decide), none for a pure rotation (no translation, or
+// too little parallax). Never throws on bad data (empty result); throws std::invalid_argument on bad options.
+std::vector<TwoViewResult> EstimateTwoViewPlanar(std::span<const Eigen::Vector2d> uv_norm1,
+                                                 std::span<const Eigen::Vector2d> uv_norm2,
+                                                 const TwoViewOptions& options);
+
 }  // namespace mcslam::geometry

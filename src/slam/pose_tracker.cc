@@ -19,6 +19,8 @@ void PoseTrackerOptions::Check() const {
   auto fail = [](const std::string& what) { throw std::invalid_argument("pose tracker: " + what); };
   if (hypotheses < 1) fail(fmt::format("hypotheses must be >= 1, got {}", hypotheses));
   if (!(sigma_rot_deg >= 0)) fail(fmt::format("sigma_rot_deg must be >= 0, got {}", sigma_rot_deg));
+  if (!(sigma_rot_motion_scale >= 0) || !std::isfinite(sigma_rot_motion_scale))
+    fail(fmt::format("sigma_rot_motion_scale must be >= 0, got {}", sigma_rot_motion_scale));
   if (!(sigma_trans_floor_m > 0)) fail(fmt::format("sigma_trans_floor_m must be > 0, got {}", sigma_trans_floor_m));
   if (!(sigma_trans_scale >= 0)) fail(fmt::format("sigma_trans_scale must be >= 0, got {}", sigma_trans_scale));
   if (!(inlier_threshold_px > 0)) fail(fmt::format("inlier_threshold_px must be > 0, got {}", inlier_threshold_px));
@@ -113,6 +115,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
                                 std::vector<double>* residuals, std::vector<uint8_t>* inliers) {
   PoseEstimate est;
   est.cam_from_world = prev;
+  const double recent_rotation_deg = last_rotation_deg_;
+  last_rotation_deg_ = 0;  // until this frame is tracked
 
   // The pivot m (see PoseTrackerOptions::pivot): the scoring points are passed as x - m, the pose as
   // (R, t + R m), and the winner converted back.
@@ -143,7 +147,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   const Eigen::Vector3d dt = LinearisedTranslation(prev, obs);
   est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
   // omega is added to all 4 quaternion components; a change dv of the vector part rotates by ~2|dv|.
-  const float sigma_q = static_cast<float>(DegToRad(options_.sigma_rot_deg) / 2.0);
+  const double sigma_rot_deg = std::max(options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg);
+  const float sigma_q = static_cast<float>(DegToRad(sigma_rot_deg) / 2.0);
 
   if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
 
@@ -186,6 +191,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   }
   est.tracked = true;
   est.keyframe = est.inliers >= options_.keyframe_min_inlier_ratio * est.scored;
+  last_rotation_deg_ = AngularDistanceDeg(prev.q, est.cam_from_world.q);
   return est;
 }
 

@@ -50,7 +50,10 @@ const char* ToString(FrameStatus s) {
 }
 
 void InitOptions::Check() const {
-  if (!(min_median_displacement_px > 0)) Fail(fmt::format("init: min_median_displacement_px must be > 0, got {}", min_median_displacement_px));
+  if (!(min_median_motion_deg > 0 && min_median_motion_deg < 90))
+    Fail(fmt::format("init: min_median_motion_deg must be in (0, 90), got {}", min_median_motion_deg));
+  if (!(max_relative_depth_noise > 0)) Fail(fmt::format("init: max_relative_depth_noise must be > 0, got {}", max_relative_depth_noise));
+  if (!(ambiguity_chi2 >= 0)) Fail(fmt::format("init: ambiguity_chi2 must be >= 0, got {}", ambiguity_chi2));
   if (min_common_features < 8) Fail(fmt::format("init: min_common_features must be >= 8, got {}", min_common_features));
   if (min_inliers < 8) Fail(fmt::format("init: min_inliers must be >= 8, got {}", min_inliers));
   if (min_points < 3) Fail(fmt::format("init: min_points must be >= 3, got {}", min_points));
@@ -68,6 +71,10 @@ void MappingOptions::Check() const {
     Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
   if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));
   if (!(min_parallax_deg >= 0)) Fail(fmt::format("mapping: min_parallax_deg must be >= 0, got {}", min_parallax_deg));
+  if (!(max_relative_depth_noise > 0))
+    Fail(fmt::format("mapping: max_relative_depth_noise must be > 0, got {}", max_relative_depth_noise));
+  if (!(max_noise_parallax_deg >= 0 && max_noise_parallax_deg < 90))
+    Fail(fmt::format("mapping: max_noise_parallax_deg must be in [0, 90), got {}", max_noise_parallax_deg));
   if (starving_inliers < 0) Fail(fmt::format("mapping: starving_inliers must be >= 0, got {}", starving_inliers));
   if (!(starving_parallax_deg >= 0))
     Fail(fmt::format("mapping: starving_parallax_deg must be >= 0, got {}", starving_parallax_deg));
@@ -139,6 +146,7 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     r.status = FrameStatus::kWaitingForInit;
     r.init_ms = Ms(t0);
     r.note = out.empty() ? "waiting for enough motion to initialise" : out.front().note;
+    r.init_rejected = !out.empty() && out.front().init_rejected;
     out.assign(1, r);
     return out;
   }
@@ -316,6 +324,124 @@ int System::PoseFramesBefore(int before_slot, int first_slot) {
   return first;
 }
 
+namespace {
+
+// The points mirrored in depth about their median depth along the reference camera's axis, each kept on its
+// ray (so the reference view is unchanged): the start of the depth-reversed twin of a two-view solution.
+std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref) {
+  std::vector<double> z;
+  for (const Eigen::Vector3d& X : points_in_ref) z.push_back(X.z());
+  const double z0 = UpperMedian(z);
+  std::vector<Eigen::Vector3d> out;
+  out.reserve(points_in_ref.size());
+  for (const Eigen::Vector3d& X : points_in_ref) {
+    const double zm = std::max(2.0 * z0 - X.z(), 0.1 * z0);
+    out.push_back(X * (zm / X.z()));
+  }
+  return out;
+}
+
+// Two refined initialisations are the same solution when their points' depths correlate at least this much
+// and their last cameras' orientations agree within kSameRotationDeg; the noise variance of the ambiguity test
+// is at least kCostFloorPx2 (a residual of 0.03 px), so that two exact fits of clean data do not count as a
+// clear winner and loser.
+constexpr double kSameStructureCorrelation = 0.9;
+constexpr double kSameRotationDeg = 2.0;
+constexpr double kCostFloorPx2 = 1e-3;
+
+// Pearson correlation of the depths (z) of the points two reconstructions share (by id): about -1 for a
+// depth-reversed pair, about +1 for the same structure; 1 when they share fewer than 3 points.
+double DepthCorrelation(const std::vector<Eigen::Vector3d>& a, const std::vector<int64_t>& a_ids,
+                        const std::vector<Eigen::Vector3d>& b, const std::vector<int64_t>& b_ids) {
+  std::unordered_map<int64_t, double> zb;
+  for (size_t i = 0; i < b.size() && i < b_ids.size(); ++i) zb[b_ids[i]] = b[i].z();
+  std::vector<std::pair<double, double>> z;
+  for (size_t i = 0; i < a.size() && i < a_ids.size(); ++i)
+    if (auto it = zb.find(a_ids[i]); it != zb.end()) z.emplace_back(a[i].z(), it->second);
+  if (z.size() < 3) return 1.0;
+  double ma = 0, mb = 0;
+  for (const auto& [x, y] : z) ma += x, mb += y;
+  ma /= static_cast<double>(z.size()), mb /= static_cast<double>(z.size());
+  double sab = 0, saa = 0, sbb = 0;
+  for (const auto& [x, y] : z) sab += (x - ma) * (y - mb), saa += (x - ma) * (x - ma), sbb += (y - mb) * (y - mb);
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 1.0;
+}
+
+}  // namespace
+
+std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector<int>& window,
+                                                               const std::optional<Pose>& last_from_ref,
+                                                               std::vector<Eigen::Vector3d> points,
+                                                               std::vector<int64_t> point_ids,
+                                                               std::string* failure, bool check_parallax) const {
+  const InitOptions& io = options_.init;
+  const double focal = focal_px_;
+  auto fail = [&](std::string why) -> std::optional<InitHypothesis> {
+    if (failure) *failure = std::move(why);
+    return std::nullopt;
+  };
+  InitHypothesis h;
+  h.points = std::move(points);
+  h.point_ids = std::move(point_ids);
+  std::unordered_map<int64_t, int> index;
+  for (size_t i = 0; i < h.point_ids.size(); ++i) index[h.point_ids[i]] = static_cast<int>(i);
+  h.poses.assign(window.size(), Pose());
+  if (last_from_ref) h.poses.back() = *last_from_ref;
+  std::vector<bool> fixed(window.size(), false);
+  fixed.front() = true;
+  geometry::PnpOptions po;
+  po.focal_px = focal;
+  po.threshold_px = options_.mapping.max_reprojection_px;
+  std::vector<geometry::BundleObservation> obs;
+  for (size_t w = 0; w < window.size(); ++w) {
+    std::vector<Eigen::Vector3d> P;
+    std::vector<Eigen::Vector2d> uv;
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features)
+      if (auto it = index.find(f.id); it != index.end()) {
+        const Eigen::Vector2d n = ideal_.PixelToNormalized(f.uv_px);
+        obs.push_back({static_cast<int>(w), it->second, n});
+        P.push_back(h.points[it->second]);
+        uv.push_back(n);
+      }
+    if (w == 0 || (last_from_ref && w + 1 == window.size())) continue;
+    const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+    h.poses[w] = pose ? *pose : h.poses[w - 1];
+  }
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal;
+  bo.huber_px = io.refine_huber_px;
+  if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
+  std::vector<double> res;
+  double cost = 0;
+  const double cap_sq = options_.mapping.max_reprojection_px * options_.mapping.max_reprojection_px;
+  for (const geometry::BundleObservation& o : obs) {
+    res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
+    cost += std::min(res.back() * res.back(), cap_sq);
+  }
+  h.median_px = UpperMedian(res);
+  h.cost = obs.empty() ? std::numeric_limits<double>::infinity() : cost / static_cast<double>(obs.size());
+  h.observations = static_cast<int>(obs.size());
+  std::vector<double> z;
+  for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
+  if (!(UpperMedian(z) > 0)) return fail("refined window: the points ended behind the reference camera");
+  // The refined window must still have the parallax asked for (between the first and the last camera), and
+  // enough for the tracks' noise: two views of a parallax θ fix a depth to about σ / (f θ) of itself, σ the
+  // noise of a feature (the window's median residual is 1.18 σ for Gaussian noise, σ per coordinate).
+  std::vector<double> parallax;
+  const Pose ends[2] = {h.poses.front(), h.poses.back()};
+  for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
+  const double refined_parallax = UpperMedian(parallax);
+  const double noise_px = h.median_px / 1.1774;
+  const double needed = std::max(io.min_median_parallax_deg,
+                                 noise_px / (focal * io.max_relative_depth_noise) * 180.0 / M_PI);
+  h.parallax_ok = refined_parallax >= needed;
+  if (check_parallax && !h.parallax_ok)
+    return fail(fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg (the tracks' noise, {:.2f} px, "
+                            "asks for it)",
+                            refined_parallax, needed, noise_px));
+  return h;
+}
+
 bool System::TryInitialise(std::vector<FrameReport>* out) {
   const InitOptions& io = options_.init;
   const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
@@ -329,65 +455,78 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     reference_slot_ = cur_slot;
     return note("reference frame for initialisation");
   }
-  const FrameRecord& ref = map_.frames[reference_slot_];
-  const FrameRecord& cur = map_.frames[cur_slot];
+  // Correspondences between the reference and this frame. Forward motion (a car) and fast turns lose features
+  // quickly: when too few are shared, the reference moves on to the oldest frame since it that still shares
+  // enough with this one, so that the motion gathered since is kept (moving it to this frame would start over).
   std::vector<Eigen::Vector2d> n1, n2;
   std::vector<int64_t> ids;
-  std::vector<double> disp;
-  for (const FeatureUndistorted& f : cur.features) {
-    const FeatureUndistorted* g = ref.Find(f.id);
-    if (!g) continue;
-    n1.push_back(ideal_.PixelToNormalized(g->uv_px));
-    n2.push_back(ideal_.PixelToNormalized(f.uv_px));
-    ids.push_back(f.id);
-    disp.push_back((f.uv_px - g->uv_px).norm());
-  }
-  if (static_cast<int>(ids.size()) < io.min_common_features) {
-    reference_slot_ = cur_slot;
-    return note(fmt::format("only {} features shared with the reference: new reference", ids.size()));
-  }
-  const double med_disp = UpperMedian(disp);
-  if (med_disp < io.min_median_displacement_px)
-    return note(fmt::format("median displacement {:.1f} px < {:.1f} px", med_disp, io.min_median_displacement_px));
-
-  // Several two-view hypotheses (the 8-point method with two RANSAC seeds, OpenCV's 5-point method). Each
-  // places every frame of the window by PnP against its points and is refined by one bundle adjustment over
-  // the whole window; the one that explains the window best (median reprojection error) is kept. With a
-  // narrow field of view two views leave a near-free bas-relief direction and sometimes a twisted pair;
-  // a wrong basin cannot explain tens of views as well as the right one.
-  struct Hypothesis {
-    std::vector<Pose> poses;  // per window slot
-    std::vector<Eigen::Vector3d> points;
-    std::vector<int64_t> point_ids;
-    double median_px = std::numeric_limits<double>::infinity();
-    geometry::TwoViewResult two_view;
+  std::vector<double> motion_deg;  // angle between the two rays of a feature, the rotation not removed
+  auto correspond = [&](int ref_slot) {
+    n1.clear(), n2.clear(), ids.clear(), motion_deg.clear();
+    const FrameRecord& r = map_.frames[ref_slot];
+    for (const FeatureUndistorted& f : map_.frames[cur_slot].features) {
+      const FeatureUndistorted* g = r.Find(f.id);
+      if (!g) continue;
+      n1.push_back(ideal_.PixelToNormalized(g->uv_px));
+      n2.push_back(ideal_.PixelToNormalized(f.uv_px));
+      ids.push_back(f.id);
+      const Eigen::Vector3d a = n1.back().homogeneous().normalized(), b = n2.back().homogeneous().normalized();
+      motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
+    }
   };
+  correspond(reference_slot_);
+  if (static_cast<int>(ids.size()) < io.min_common_features) {
+    int next = cur_slot;
+    for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
+      int shared = 0;
+      for (const FeatureUndistorted& f : map_.frames[cur_slot].features) shared += map_.frames[s].Find(f.id) != nullptr;
+      if (shared >= io.min_common_features) next = s;
+    }
+    const size_t had = ids.size();
+    reference_slot_ = next;
+    if (next == cur_slot) return note(fmt::format("only {} features shared with the reference: new reference", had));
+    correspond(reference_slot_);
+  }
+  const FrameRecord& ref = map_.frames[reference_slot_];
+  const FrameRecord& cur = map_.frames[cur_slot];
+  const double med_motion = UpperMedian(motion_deg);
+  if (med_motion < io.min_median_motion_deg)
+    return note(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
+
+  // Two-view hypotheses: the 8-point method with two RANSAC seeds, OpenCV's 5-point method, and, when a
+  // homography explains the views (a dominant plane), the motions of its decomposition. Each places every
+  // frame of the window by PnP against its points and is refined by one bundle adjustment over the whole
+  // window; the one that explains the window best is kept. With a narrow field of view two views leave a
+  // near-free bas-relief direction and sometimes a twisted pair; a wrong basin cannot explain tens of views
+  // as well as the right one.
   std::vector<int> window;
   for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
   const double focal = focal_px_;
-  std::optional<Hypothesis> best;
   std::string last_failure;
+  geometry::TwoViewOptions tv;
+  tv.ransac_threshold_px = io.ransac_threshold_px;
+  tv.focal_px = focal;
+  tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+  std::vector<geometry::TwoViewResult> seeds;
   const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
                                                                    {io.method, options_.seed + 1},
                                                                    {geometry::EssentialMethod::kFivePointOpenCV, 0},
                                                                    {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
   bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
   bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
+  bool planar = false;            // a homography explains the views
   for (const auto& [method, seed] : tries) {
     if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
     if (method == geometry::EssentialMethod::kFivePointOpenCV) {
       if (five_point_tried) continue;
       five_point_tried = true;
     }
-    geometry::TwoViewOptions tv;
     tv.method = method;
-    tv.ransac_threshold_px = io.ransac_threshold_px;
-    tv.focal_px = focal;
     tv.seed = seed;
-    tv.max_reprojection_px = options_.mapping.max_reprojection_px;
     geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
     if (!tvr.ok) {
       last_failure = "two-view geometry failed: " + tvr.failure;
+      planar |= tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
       // Only a refusal of the data itself (too few, NaN, planar or pure rotation) holds for every seed.
       const bool data_refused = tvr.status == geometry::TwoViewStatus::kBadInput ||
                                 tvr.status == geometry::TwoViewStatus::kTooFewCorrespondences ||
@@ -395,67 +534,80 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       eight_point_failed |= method == geometry::EssentialMethod::kEightPoint && data_refused;
       continue;
     }
-    if (tvr.num_inliers < io.min_inliers || tvr.num_triangulated < io.min_points ||
-        tvr.median_parallax_deg < io.min_median_parallax_deg) {
+    seeds.push_back(std::move(tvr));
+  }
+  const size_t num_essential_seeds = seeds.size();
+  if (planar)
+    for (geometry::TwoViewResult& tvr : geometry::EstimateTwoViewPlanar(n1, n2, tv)) seeds.push_back(std::move(tvr));
+
+  std::vector<InitHypothesis> refined;
+  for (size_t k = 0; k < seeds.size(); ++k) {
+    const geometry::TwoViewResult& tvr = seeds[k];
+    const bool passes = tvr.num_inliers >= io.min_inliers && tvr.num_triangulated >= io.min_points &&
+                        tvr.median_parallax_deg >= io.min_median_parallax_deg;
+    if (!passes)
       last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
                                  tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, io.min_inliers,
                                  io.min_points, io.min_median_parallax_deg);
-      continue;
-    }
-    Hypothesis h;
-    std::unordered_map<int64_t, int> index;
+    // A plane's motions are judged together: one short of the gates still stands against the other.
+    const bool planar_seed = k >= num_essential_seeds;
+    if (!passes && !planar_seed) continue;
+    std::vector<Eigen::Vector3d> points;
+    std::vector<int64_t> point_ids;
     for (size_t i = 0; i < ids.size(); ++i)
-      if (tvr.triangulated[i]) index[ids[i]] = static_cast<int>(h.points.size()), h.points.push_back(tvr.points_in_cam1[i]), h.point_ids.push_back(ids[i]);
-    h.poses.assign(window.size(), Pose());
-    h.poses.back() = tvr.cam2_from_cam1;
-    std::vector<bool> fixed(window.size(), false);
-    fixed.front() = true;
-    geometry::PnpOptions po;
-    po.focal_px = focal;
-    po.threshold_px = options_.mapping.max_reprojection_px;
-    std::vector<geometry::BundleObservation> obs;
-    for (size_t w = 0; w < window.size(); ++w) {
-      std::vector<Eigen::Vector3d> P;
-      std::vector<Eigen::Vector2d> uv;
-      for (const FeatureUndistorted& f : map_.frames[window[w]].features)
-        if (auto it = index.find(f.id); it != index.end()) {
-          const Eigen::Vector2d n = ideal_.PixelToNormalized(f.uv_px);
-          obs.push_back({static_cast<int>(w), it->second, n});
-          P.push_back(h.points[it->second]);
-          uv.push_back(n);
-        }
-      if (w == 0 || w + 1 == window.size()) continue;
-      const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
-      h.poses[w] = pose ? *pose : h.poses[w - 1];
-    }
-    geometry::BundleAdjustOptions bo;
-    bo.focal_px = focal;
-    bo.huber_px = io.refine_huber_px;
-    if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
-    std::vector<double> res;
-    for (const geometry::BundleObservation& o : obs)
-      res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
-    h.median_px = UpperMedian(res);
-    // The refined window must still have the parallax asked for (between the first and the last camera).
-    std::vector<double> parallax;
-    const Pose ends[2] = {h.poses.front(), h.poses.back()};
-    for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
-    const double refined_parallax = UpperMedian(parallax);
-    std::vector<double> z;
-    for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
-    if (!(UpperMedian(z) > 0)) {
-      last_failure = "refined window: the points ended behind the reference camera";
+      if (tvr.triangulated[i]) points.push_back(tvr.points_in_cam1[i]), point_ids.push_back(ids[i]);
+    std::string why;
+    std::optional<InitHypothesis> h = RefineInitWindow(window, tvr.cam2_from_cam1, points, point_ids, &why, passes);
+    if (!h) {
+      if (passes) last_failure = why;
       continue;
     }
-    if (refined_parallax < io.min_median_parallax_deg) {
-      last_failure = fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg", refined_parallax,
-                                 io.min_median_parallax_deg);
-      continue;
-    }
-    h.two_view = std::move(tvr);
-    if (!best || h.median_px < best->median_px) best = std::move(h);
+    h->two_view_inliers = tvr.num_inliers;
+    h->two_view_parallax_deg = tvr.median_parallax_deg;
+    h->eligible = passes;
+    refined.push_back(std::move(*h));
   }
-  if (!best) return note(last_failure);
+  auto cheapest = [&] {
+    auto best_it = refined.end();
+    for (auto it = refined.begin(); it != refined.end(); ++it)
+      if (it->eligible && (best_it == refined.end() || it->cost < best_it->cost)) best_it = it;
+    return best_it;
+  };
+  if (cheapest() == refined.end()) return note(last_failure);
+  // The depth-reversal (Necker) ambiguity: seen through a narrow field of view, a scene and its mirror image
+  // in depth, with the cameras turned the other way, project nearly alike. The mirror of the winner is refined
+  // too and competes with the rest.
+  {
+    const InitHypothesis& winner = *cheapest();
+    // Refined whatever its parallax: short of it, it still stands against the winner.
+    if (std::optional<InitHypothesis> mirror = RefineInitWindow(window, std::nullopt, MirrorInDepth(winner.points),
+                                                                winner.point_ids, nullptr, /*check_parallax=*/false)) {
+      mirror->two_view_inliers = winner.two_view_inliers;
+      mirror->two_view_parallax_deg = winner.two_view_parallax_deg;
+      mirror->mirrored = true;
+      mirror->eligible = mirror->parallax_ok;
+      refined.push_back(std::move(*mirror));
+    }
+  }
+  // Ambiguity: another solution with another structure (its points' depths not in step with the winner's: the
+  // depth-reversed mirror, the plane's twin) explains the window about as well. The views cannot tell them
+  // apart yet: wait for more motion rather than risk a wrong (mirrored, twisted) map.
+  std::optional<InitHypothesis> best = *cheapest();
+  for (const InitHypothesis& h : refined) {
+    const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||
+                          AngularDistanceDeg(best->poses.back().q, h.poses.back().q) > kSameRotationDeg;
+    // How much worse it explains the window, as a chi-square: the summed squared residuals' difference over
+    // the window's noise variance (the best solution's mean squared residual, at least the floor's).
+    const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
+    if (distinct && chi2 < io.ambiguity_chi2) {
+      note(fmt::format("ambiguous initialisation: {} explains the window about as well as the best solution (mean "
+                       "squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
+                       h.mirrored ? "its mirror in depth" : "another solution with another structure", h.cost,
+                       best->cost));
+      out->front().init_rejected = true;
+      return false;
+    }
+  }
 
   // Gauge: the reference camera is the world; the first baseline has length 1, or the true length when
   // the ground truth is offered (--gt-scale, as the paper sets the scale by hand for its precision test).
@@ -491,7 +643,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   init_slot_ = cur_slot;
   init_baseline_ = baseline;
   settling_ = io.settle_parallax_deg > 0;
-  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view.median_parallax_deg, 1e-3);
+  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
   MarkSeen(cur_slot);
   RefreshInlierFlags(cur_slot);
   PoseTrackerOptions topts = options_.tracker;
@@ -511,9 +663,10 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       r.new_points = static_cast<int>(depths.size());
       r.note = fmt::format(
           "initialised from frames {} and {}: {} inliers, {} points, median parallax {:.2f} deg, window of {} frames "
-          "refined to a median reprojection error of {:.2f} px",
-          ref.index, cur.index, best->two_view.num_inliers, depths.size(), best->two_view.median_parallax_deg,
-          window.size(), best->median_px);
+          "refined to a median reprojection error of {:.2f} px{}",
+          ref.index, cur.index, best->two_view_inliers, depths.size(), best->two_view_parallax_deg,
+          window.size(), best->median_px,
+          best->mirrored ? " (the depth-reversed twin of the two-view solution, which explained the window better)" : "");
     }
     r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
     out->push_back(r);
@@ -618,8 +771,24 @@ int System::TriangulateNewPoints(int slot, int inliers) {
   geometry::TriangulationOptions to;
   to.max_reprojection_px = mo.max_reprojection_px;
   to.focal_px = focal_px_;
-  to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(mo.min_parallax_deg, mo.starving_parallax_deg)
-                                                      : mo.min_parallax_deg;
+  // The parallax a new point needs: at least min_parallax_deg, and enough for the tracks' noise, measured as
+  // the median residual of the map's points in the recent keyframes (1.18 σ for Gaussian noise of σ per
+  // coordinate): a point triangulated from a parallax θ has a depth error of about σ / (f θ) of its depth,
+  // and new points' depth errors are what a monocular map's scale drifts with.
+  {
+    FrameReport stats;
+    ResidualStats(slot, &stats);
+    if (stats.reproj_median_px > 0) recent_residual_px_.push_back(stats.reproj_median_px);
+    if (recent_residual_px_.size() > kResidualHistory) recent_residual_px_.pop_front();
+  }
+  const double noise_px =
+      recent_residual_px_.empty()
+          ? 0.0
+          : UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())) / 1.1774;
+  noise_parallax_deg_ = std::min(noise_px / (focal_px_ * mo.max_relative_depth_noise) * 180.0 / M_PI,
+                                 mo.max_noise_parallax_deg);
+  const double wanted = std::max(mo.min_parallax_deg, noise_parallax_deg_);
+  to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(wanted, mo.starving_parallax_deg) : wanted;
   int added = 0;
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* existing = map_.Find(f.id);

@@ -2,7 +2,9 @@
 // The SLAM back end (paper §5-6): from feature observations alone, it initialises from two views (§6.1),
 // tracks every frame by Monte Carlo pose estimation (§5), and on keyframes adds points by linear
 // triangulation and refines points by Monte Carlo adjustment over Fibonacci-spaced keyframes (§6.2-6.3).
+#include <deque>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -22,14 +24,25 @@
 namespace mcslam::slam {
 
 struct InitOptions {
-  double min_median_displacement_px = 20.0;  // start trying once the features moved this much (median)
+  // Start trying once the features moved this much (median angle between a feature's two rays, the rotation
+  // not removed): 2.3 degrees is 20 px at f = 500 px. An angle, so one value serves every focal length.
+  double min_median_motion_deg = 2.3;
   int min_common_features = 40;              // fewer shared with the reference: the reference moves on
   int min_inliers = 40;                      // epipolar inliers needed
   int min_points = 30;                       // triangulated points needed
-  // Median parallax of those points, before and after the window's refinement: under ~3 degrees and σ = 1 px a
-  // near pure-rotation solution explains the views about as well as the true one; 5 was the best of 3, 5
-  // and 7 over six noisy scenario seeds (issue #4 note).
-  double min_median_parallax_deg = 5.0;
+  // Median parallax of those points, before and after the window's refinement, at least this; and after the
+  // refinement at least what the tracks' noise asks for: two views of a parallax θ fix a depth to about
+  // σ / (f θ) of itself (σ the features' noise, measured as the refined window's residual), which must not
+  // exceed max_relative_depth_noise. At σ = 1 px and f = 500 px that is 4.6 degrees (a near pure-rotation
+  // solution explains such views about as well as the true one under ~3 degrees: issue #4's note found 5
+  // the best of 3, 5, 7 there); real tracks at 0.2-0.5 px need the floor only.
+  double min_median_parallax_deg = 3.0;
+  double max_relative_depth_noise = 0.02;
+  // Ambiguity: another refined solution with another structure (the best one's depth-reversed twin, a plane's
+  // second motion) must explain the window worse by at least this chi-square (its summed squared residuals
+  // minus the best one's, over the best one's mean squared residual), or the initialisation waits for more
+  // motion. 25: a difference that noise alone gives with odds of about one in a million (1 dof).
+  double ambiguity_chi2 = 25.0;
   geometry::EssentialMethod method = geometry::EssentialMethod::kEightPoint;
   double ransac_threshold_px = 1.5;
   // Every frame from the reference to the initialising one is placed by PnP against the two-view points and
@@ -64,6 +77,10 @@ struct MappingOptions {
   // New points (linear triangulation between posed frames).
   int min_track_frames = 3;                  // posed frames a feature must be seen in
   double min_parallax_deg = 2.0;
+  // ... and at least what the tracks' noise asks for (System::TriangulateNewPoints): a depth error of at most
+  // this fraction of the depth, capped at max_noise_parallax_deg.
+  double max_relative_depth_noise = 0.03;
+  double max_noise_parallax_deg = 12.0;
   // A map running dry: when fewer inliers than this support a keyframe's pose, its new points need only
   // starving_parallax_deg (if lower): points from less parallax are less accurate, but a pose with none to
   // score is lost, and a larger min_parallax_deg with tracks that end early can starve the map.
@@ -150,6 +167,9 @@ struct FrameReport {
   double reproj_median_px = 0;  // median residual of all observations of map points in this frame
   double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
   std::string note;             // why lost / waiting
+  // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
+  // ambiguity), as opposed to no initialisation being possible yet.
+  bool init_rejected = false;
 };
 
 class System {
@@ -178,6 +198,28 @@ class System {
 
  private:
   bool TryInitialise(std::vector<FrameReport>* out);
+  // A two-view solution refined over the initialisation's window (reference .. current frame).
+  struct InitHypothesis {
+    std::vector<Pose> poses;  // per window slot, cam_from_reference
+    std::vector<Eigen::Vector3d> points;  // in the reference camera
+    std::vector<int64_t> point_ids;
+    double median_px = std::numeric_limits<double>::infinity();  // over the window's observations
+    double cost = std::numeric_limits<double>::infinity();       // mean squared residual, each capped (px^2)
+    int observations = 0;                                          // in the window, over which cost is the mean
+    int two_view_inliers = 0;
+    double two_view_parallax_deg = 0;
+    bool mirrored = false;  // the depth-reversed twin of the two-view solution
+    // May become the map: it passed every gate. Others (a plane's second motion, short of parallax) only stand
+    // in the ambiguity test: while one explains the window as well, no solution is taken.
+    bool eligible = true;
+    bool parallax_ok = false;  // the refined window has the parallax asked for
+  };
+  // Places every frame of `window` by PnP against `points` (the last one at last_from_ref when given), refines
+  // the window by one bundle adjustment and checks it (points in front, parallax for the tracks' noise).
+  // nullopt with *failure (when given) saying why.
+  std::optional<InitHypothesis> RefineInitWindow(const std::vector<int>& window, const std::optional<Pose>& last_from_ref,
+                                                 std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
+                                                 std::string* failure, bool check_parallax = true) const;
   double ParallaxFromReference(int slot) const;
   // The points seen at least twice among some frames (slots), and their observations, for a bundle adjustment.
   struct WindowPoints {
@@ -234,6 +276,10 @@ class System {
   int posed_from_ = -1;            // the first posed slot: the reference, or a frame before it (pose_frames_before_reference)
   int pruned_until_ = 0;           // frames before this slot have dropped their features (history_frames)
   double init_baseline_ = 1.0;     // its distance from the reference camera: the scale, kept by every settling
+  // The median residual of the map's points in the last keyframes (MappingOptions::max_relative_depth_noise).
+  static constexpr size_t kResidualHistory = 15;
+  std::deque<double> recent_residual_px_;
+  double noise_parallax_deg_ = 0;
 };
 
 }  // namespace mcslam::slam

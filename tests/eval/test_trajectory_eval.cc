@@ -357,5 +357,35 @@ TEST(Eval, CsvAndSummary) {
   EXPECT_THROW(WriteFrameErrorsCsv(dir / "no/such/dir.csv", e), std::runtime_error);
 }
 
+// The mirror test (issue #16): an estimate that is a mirror image of the truth (x -> -x, orientations
+// reflected as a camera seen in a mirror: R -> D R D with D = diag(-1, 1, 1)) cannot be aligned by any
+// Sim(3); mcslam eval must say "mirrored". A Sim(3) copy and a noisy copy must not be called so.
+TEST(EvaluateTrajectory, MirrorImageIsCalledMirroredAndASim3CopyIsNot) {
+  const Trajectory gt = MakeGroundTruth(60);
+  Trajectory mirror = gt;
+  const Eigen::Matrix3d d = Eigen::Vector3d(-1, 1, 1).asDiagonal();
+  for (Pose& p : mirror.world_from_cam) {
+    p.t = d * p.t;
+    p.q = Eigen::Quaterniond(d * p.q.toRotationMatrix() * d).normalized();
+  }
+  const TrajectoryErrors m = EvaluateTrajectory(gt, mirror);
+  EXPECT_TRUE(m.mirrored);
+  const TrajectoryErrors same = EvaluateTrajectory(gt, EstimateFrom(gt, KnownSim3()));
+  EXPECT_FALSE(same.mirrored);
+  EXPECT_NEAR(same.gt_path_length_m, m.gt_path_length_m, 1e-12);
+  // The path length: the sum of the steps between matched ground-truth positions.
+  double length = 0;
+  for (size_t i = 1; i < gt.world_from_cam.size(); ++i) length += (gt.world_from_cam[i].t - gt.world_from_cam[i - 1].t).norm();
+  EXPECT_NEAR(same.gt_path_length_m, length, 1e-9);
+}
+
+// A straight path leaves the linear fit's determinant to noise: it is never called mirrored for that.
+TEST(EvaluateTrajectory, StraightPathIsNotCalledMirrored) {
+  const Trajectory gt = Straight(30);
+  Trajectory est = gt;
+  for (size_t i = 0; i < est.world_from_cam.size(); ++i) est.world_from_cam[i].t.y() += 1e-3 * std::sin(1.7 * i);
+  EXPECT_FALSE(EvaluateTrajectory(gt, est).mirrored);
+}
+
 }  // namespace
 }  // namespace mcslam::eval

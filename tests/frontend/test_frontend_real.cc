@@ -90,10 +90,10 @@ Figures RunSequence(const std::string& dir, int max_frames, const FrontendOption
 TEST(FrontendReal, Kitti06KeepsMostFeaturesFrameToFrame) {
   const std::string dir = SequenceDir("kitti_odometry_06_frames000-050");
   if (dir.empty()) GTEST_SKIP() << "KITTI 06 excerpt not found (set MCSLAM_DATA); skipping";
-  // As `mcslam run` is told for KITTI (--anchor-mismatch reanchor): at 10 Hz forward, a tenth of the tracks
-  // no longer match their birth patch one frame later; dropped, the survival falls to 0.38 (min) / 0.47 (mean).
+  // The default options: at 10 Hz forward a tenth of the tracks no longer match their birth patch one frame
+  // later, which the automatic mismatch policy measures and answers with new patches; dropped
+  // (AnchorMismatch::kDrop), the survival falls to 0.38 (min) / 0.47 (mean).
   FrontendOptions options;
-  options.anchor_reanchor_on_mismatch = true;
   const Figures fig = RunSequence(dir, 11, options, "KITTI 06 frames 0-10");
   EXPECT_EQ(fig.frames, 11);
   EXPECT_EQ(fig.skipped, 0);

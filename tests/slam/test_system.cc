@@ -116,17 +116,20 @@ TEST(System, StaticCameraNeverInitialises) {
   EXPECT_FALSE(res.initialised);
   ASSERT_EQ(res.reports.size(), 40u);
   for (const FrameReport& r : res.reports) EXPECT_EQ(r.status, FrameStatus::kWaitingForInit);
-  EXPECT_NE(res.reports.back().note.find("displacement"), std::string::npos) << res.reports.back().note;
+  EXPECT_NE(res.reports.back().note.find("feature motion"), std::string::npos) << res.reports.back().note;
 }
 
-TEST(System, PlanarSceneDoesNotCrashAndSaysWhy) {
-  // Points on one plane, seen by the scenario's moving camera: the two-view geometry refuses a planar scene
-  // (a homography explains it), so the system keeps waiting and says so.
+// Points on one plane (a table top under the box's place), seen by the scenario's moving camera: the essential
+// matrix is not determined (a homography explains the views), so the initialisation decomposes the homography
+// and lets the window of frames choose between its two motions (issue #16: planar scenes). Without that path
+// the system waited for ever.
+TEST(System, PlanarSceneInitialisesFromTheHomography) {
   sim::PaperScenarioOptions so;
   so.frames = 60;
   const sim::SyntheticSequence seq = sim::MakePaperScenario(so);
   apps::SequenceInput in;
   in.camera = seq.camera;
+  in.groundtruth = sim::ToTrajectory(seq);
   CounterRng rng(5, 0);
   std::vector<Eigen::Vector3d> plane;
   for (int i = 0; i < 300; ++i) plane.emplace_back(rng.Uniform(-0.6, 0.6), rng.Uniform(-0.6, 0.6), 0.3);
@@ -144,10 +147,21 @@ TEST(System, PlanarSceneDoesNotCrashAndSaysWhy) {
   apps::SlamRunResult res;
   ASSERT_NO_THROW(res = RunSystem(in, /*gt_scale=*/false));
   ASSERT_EQ(res.reports.size(), 60u);
-  bool said_planar = false;
-  for (const FrameReport& r : res.reports) said_planar |= r.note.find("planar") != std::string::npos;
-  EXPECT_FALSE(res.initialised);
-  EXPECT_TRUE(said_planar);
+  ASSERT_TRUE(res.initialised);
+  int tracked = 0, init_frame = -1;
+  for (const FrameReport& r : res.reports) {
+    tracked += r.status == FrameStatus::kTracked;
+    if (r.initialisation && !r.note.empty() && init_frame < 0) init_frame = static_cast<int>(r.index);
+  }
+  // Measured: initialised at frame PLANAR_INIT, every frame from the reference on tracked.
+  EXPECT_LE(init_frame, 30);
+  EXPECT_EQ(tracked, 60);
+  const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+  EXPECT_FALSE(err.mirrored);
+  // Clean data: measured PLANAR_ATE m mean; the noisy scenario's bound, 2 cm, is far above that and far below
+  // the wrong motion of the homography's pair (centimetres to decimetres off).
+  EXPECT_LT(err.ate_m.mean, 0.02);
+  EXPECT_LT(err.rot_deg.mean, 1.0);
 }
 
 // The reference moves on while waiting (frame 10 keeps only 20 features, fewer than min_common_features
