@@ -153,12 +153,15 @@ TEST(System, PlanarSceneInitialisesFromTheHomography) {
     tracked += r.status == FrameStatus::kTracked;
     if (r.initialisation && !r.note.empty() && init_frame < 0) init_frame = static_cast<int>(r.index);
   }
-  // Measured: initialised at frame PLANAR_INIT, every frame from the reference on tracked.
+  // Measured: initialised at frame 12 (frames 7-11 wait: the plane's second motion explains the window as
+  // well), every frame tracked.
   EXPECT_LE(init_frame, 30);
   EXPECT_EQ(tracked, 60);
   const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
   EXPECT_FALSE(err.mirrored);
-  // Clean data: measured PLANAR_ATE m mean; the noisy scenario's bound, 2 cm, is far above that and far below
+  std::printf("[ planar   ] initialised at frame %d, ATE mean %.5f m, rotation mean %.3f deg\n", init_frame,
+              err.ate_m.mean, err.rot_deg.mean);
+  // Clean data: measured 0.7 mm mean (0.2 deg); the noisy scenario's bound, 2 cm, is far above that and far below
   // the wrong motion of the homography's pair (centimetres to decimetres off).
   EXPECT_LT(err.ate_m.mean, 0.02);
   EXPECT_LT(err.rot_deg.mean, 1.0);
