@@ -48,6 +48,11 @@ constexpr size_t kMaxRemapRequests = 200;
 // Relocalisation compares each new track with this many lost map points at most, the most recently seen:
 // the cost of a try stays bounded however long the run (at 400 tracks, ~25 ms here).
 constexpr size_t kMaxRelocalisationPoints = 2000;
+// Relocalisation's descriptor distance cap (remapping's is FrontendOptions::remap_max_distance, 250). A lost
+// frame is usually a view from elsewhere than where the points were last described, and the RANSAC PnP that
+// follows verifies every match: Lowe's test alone (with a cap that only stops the nearest of unrelated points,
+// whose median distance is ~520 here) keeps the matches that a changed view pushed past 250.
+constexpr double kRelocalisationMaxDistance = 400.0;
 
 bool AllDigits(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
@@ -305,7 +310,7 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
        "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
        "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
        "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-       "fe_remap_over_budget,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,"
+       "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,"
        "fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms,note\n";
   auto clean = [](std::string s) {
     for (char& c : s)
@@ -326,13 +331,13 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
       te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
     const frontend::FrameStats& s = row.fe;
     f << fmt::format(
-        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
+        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
         "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
         r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
         r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px, r.track_ms, r.map_ms,
         r.adjust_ms, r.init_ms, te, re, row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward,
         s.lost_patch_error, s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
-        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms,
+        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms,
         s.describe_wait_ms, s.total_ms, row.frame_ms, clean(r.note));
   }
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
@@ -362,6 +367,8 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
   std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<const frontend::Descriptor*> looks;
   for (const auto& [id, d] : map_side) looks.push_back(d);
+  frontend::FrontendOptions match_options = fe.options();
+  match_options.remap_max_distance = kRelocalisationMaxDistance;
   struct Match {
     float distance;
     int64_t track;
@@ -377,7 +384,7 @@ std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::Fr
     if (map_side.size() < 2) continue;
     const std::optional<frontend::Descriptor> d = fe.GetDescriptor(f.feature_id);
     if (!d) continue;
-    const std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, fe.options());
+    const std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, match_options);
     if (!m) continue;
     const auto [it, fresh] = best_for_point.try_emplace(map_side[m->index].first, Match{m->distance, f.feature_id, f.uv_px});
     if (!fresh && m->distance < it->second.distance) it->second = {m->distance, f.feature_id, f.uv_px};
@@ -444,6 +451,13 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_flag("--no-relocalise{false}", o->relocalise,
                 "Once lost, only the last pose is searched around (default: the features are also matched to the map "
                 "by their descriptors, and a pose from those restarts the tracking)");
+  cmd->add_option("--descriptor-refresh-frames", o->frontend.descriptor_refresh_frames,
+                  "Front end: a track is described again once its descriptor is this many frames old, so that a lost "
+                  "map point is matched with how it looked when last seen (0: birth descriptors only)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--no-jolt-recovery{false}", o->frontend.jolt_recovery,
+                "Front end: do not retry the tracks LK lost from where the image's measured global shift puts them");
   cmd->add_option("--anchor-every", o->frontend.anchor_every,
                   "Front end: frames between alignments of each track with the patch it was born with (0: off)")
       ->capture_default_str();
@@ -794,7 +808,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_init, be_total, frame_total;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
-          remap_over_budget = 0, remap_refused = 0;
+          remap_over_budget = 0, remap_refused = 0, refreshed = 0;
   double features_sum = 0;
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
@@ -813,6 +827,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     remap_outside += row.fe.remap_outside, remap_no_candidate += row.fe.remap_no_candidate;
     remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
     remap_refused += row.fe.remap_refused_id;
+    refreshed += row.fe.refreshed;
     be_total.Add(row.backend_ms);
     // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
     // initialisation then replaces; the wall time of Process before the map exists is that time, all of it.
@@ -876,7 +891,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                    {"remap_outside", remap_outside},
                    {"remap_no_candidate", remap_no_candidate},
                    {"remap_no_match", remap_no_match},
-                   {"remap_over_budget", remap_over_budget}};
+                   {"remap_over_budget", remap_over_budget},
+                   {"descriptors_refreshed", refreshed}};
   {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
     // pose step succeeded from it.

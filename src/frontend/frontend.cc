@@ -112,6 +112,7 @@ struct Track {
   int age = 0;
   bool remapped = false;
   std::optional<Descriptor> descriptor;
+  int described_at_age = 0;  // the track's age when `descriptor` was taken
   // The patch the track was born with and the affine warp from patch offsets to image offsets found at the
   // last alignment (linear part only; the translation follows the track).
   AffinePatch anchor;
@@ -230,6 +231,10 @@ void FrontendOptions::Check() const {
     fail(fmt::format("kalman_measurement_sigma_px must be positive (got {})", kalman_measurement_sigma_px));
   if (!(init_velocity_radius_px >= 0) || !std::isfinite(init_velocity_radius_px))
     fail(fmt::format("init_velocity_radius_px must be >= 0 (got {})", init_velocity_radius_px));
+  if (!(jolt_min_shift_px >= 0) || !std::isfinite(jolt_min_shift_px))
+    fail(fmt::format("jolt_min_shift_px must be >= 0 (got {})", jolt_min_shift_px));
+  if (descriptor_refresh_frames < 0)
+    fail(fmt::format("descriptor_refresh_frames must be >= 0 (got {})", descriptor_refresh_frames));
   if (!(descriptor_size_px >= 1 && descriptor_size_px <= 64))
     fail(fmt::format("descriptor_size_px must be in [1, 64] (got {})", descriptor_size_px));
   if (remap_window_px < 1) fail(fmt::format("remap_window_px must be >= 1 (got {})", remap_window_px));
@@ -262,14 +267,18 @@ struct Frontend::Impl {
   double pending_ms = 0;
 
   // Scratch kept between frames to avoid reallocating.
-  cv::Mat eig, eig_dilated, blocked;
+  cv::Mat eig, eig_dilated, blocked, hann;
 
   double JoinDescription() {
     if (!pending) return 0.0;
     const auto t0 = Clock::now();
     task_group.wait();
     for (size_t k = 0; k < pending_tracks.size(); ++k)
-      if (pending_ok[k]) tracks[pending_tracks[k]].descriptor = pending_descriptors[k];
+      if (pending_ok[k]) {
+        Track& t = tracks[pending_tracks[k]];
+        t.descriptor = pending_descriptors[k];
+        t.described_at_age = t.age;
+      }
     pending = false;
     pending_tracks.clear();
     return MsSince(t0);
@@ -411,6 +420,40 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       st.retried = static_cast<int>(retry.size());
       round_trip(retry, o.retry_pyramid_levels);
       for (size_t i : retry) st.recovered += outcome[i] == kOk;
+    }
+    // A jolt of the camera (a sudden turn, a shake) moves the whole image away from every track's own
+    // prediction, further than the deeper pyramid reaches; LK then fails, or worse settles in a local minimum
+    // that the round trip confirms. The image's global shift, measured by phase correlation of a coarse
+    // pyramid level (the whole image: it needs no track to have followed), gives the tracks that failed
+    // twice a last try from where that shift puts them, when it is jolt_min_shift_px away from their
+    // prediction.
+    std::vector<size_t> failed;
+    for (size_t i = 0; i < n; ++i)
+      if (outcome[i] == kStatus || outcome[i] == kForwardBackward) failed.push_back(i);
+    if (o.jolt_recovery && !failed.empty()) {
+      const int level = std::min(2, static_cast<int>(std::min(pyramid.size(), prev_pyramid.size()) / 2) - 1);
+      if (level >= 0) {
+        cv::Mat a, c;
+        prev_pyramid[static_cast<size_t>(2 * level)].convertTo(a, CV_32F);
+        pyramid[static_cast<size_t>(2 * level)].convertTo(c, CV_32F);
+        if (a.size() == c.size() && a.cols >= 16 && a.rows >= 16) {
+          if (hann.size() != a.size()) cv::createHanningWindow(hann, a.size(), CV_32F);
+          double response = 0;
+          const cv::Point2d d = cv::phaseCorrelate(a, c, hann, &response) * static_cast<double>(1 << level);
+          const cv::Point2f shift(static_cast<float>(d.x), static_cast<float>(d.y));
+          std::vector<size_t> again;
+          for (size_t i : failed) {
+            const cv::Point2f from = clamp_to_image(p0[i] + shift);
+            if (outside(from) || cv::norm(from - start[i]) < o.jolt_min_shift_px) continue;
+            start[i] = from;
+            again.push_back(i);
+          }
+          if (!again.empty()) {
+            round_trip(again, o.retry_pyramid_levels);
+            for (size_t i : again) st.jolt_recovered += outcome[i] == kOk;
+          }
+        }
+      }
     }
   }
 
@@ -732,6 +775,21 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   }
   st.remap_ms = requests.empty() ? 0.0 : MsSince(t_remap);
 
+  // Tracks whose descriptor is descriptor_refresh_frames old are described again where they are now, when the
+  // whole descriptor window is inside the image: a map point that is lost and comes back (remapping,
+  // relocalisation) is then matched with how it looked when it was last seen, not at its birth.
+  if (o.descriptor_refresh_frames > 0) {
+    const float margin = static_cast<float>(std::ceil(2.5 * 1.5 * o.descriptor_size_px));
+    for (size_t i = 0; i < n_carried; ++i) {
+      const Track& t = tracks[i];
+      if (!t.descriptor || t.age - t.described_at_age < o.descriptor_refresh_frames) continue;
+      if (t.uv.x < margin || t.uv.y < margin || t.uv.x > static_cast<float>(W - 1) - margin ||
+          t.uv.y > static_cast<float>(H - 1) - margin)
+        continue;
+      to_describe.push_back(i);
+      ++st.refreshed;
+    }
+  }
   StartDescription(gray, std::move(to_describe), &st);
 }
 
@@ -809,7 +867,10 @@ bool Frontend::Relabel(int64_t from, int64_t to, const std::optional<Descriptor>
   if (!track) return false;
   track->id = to;
   track->remapped = true;
-  if (descriptor) track->descriptor = descriptor;
+  if (descriptor) {
+    track->descriptor = descriptor;
+    track->described_at_age = track->age;
+  }
   return true;
 }
 

@@ -35,6 +35,12 @@ struct FrontendOptions {
   int retry_pyramid_levels = 4;          // a track lost with pyramid_levels is tried once more with this many
                                          // levels (a young track, a jolt); <= pyramid_levels: no retry
   int window_px = 21;                    // LK window side (odd)
+  // Jolt recovery: the tracks that failed (with the retry too) are tried once more from where the image's
+  // global shift (phase correlation of a coarse pyramid level) puts them, when that is at least
+  // jolt_min_shift_px from their own prediction. A sudden turn of the camera moves the whole image away from
+  // the constant-velocity predictions; below a few pixels the retry already covers it.
+  bool jolt_recovery = true;
+  double jolt_min_shift_px = 3.0;
   int max_iterations = 30;               // LK iterations per level
   double epsilon_px = 0.01;              // LK stops when an update is shorter
   double min_eigen_threshold = 1e-4;     // LK drops a point whose window has less texture than this
@@ -79,6 +85,13 @@ struct FrontendOptions {
   // ---- descriptors (SIFT, once per track) -------------------------------------------------------------
   double descriptor_size_px = 6.0;  // keypoint size given to SIFT (its patch is ~6x this wide); upright
   bool describe_async = false;      // describe new tracks on a TBB task, joined when next needed
+  // A track is described again (where it is then, with the new tracks of that frame) once its descriptor is
+  // this many frames old, so that a lost map point is looked for with how it looked when last seen. SIFT of
+  // one tracked point drifts with the view: median L2 distance to its birth descriptor 132 after 10 frames,
+  // 228 after 40 (the paper scenario, against 520 between different points; 7-Scenes: 94 and 186), so with
+  // remap_max_distance 250 a birth descriptor stops matching after about a second of hand-held motion.
+  // 0: never (birth descriptors only).
+  int descriptor_refresh_frames = 10;
   // ---- remapping of lost map points (§6.4) ------------------------------------------------------------
   int remap_window_px = 15;           // half-side of the square search window around the projection
   int remap_max_candidates = 5;       // strongest new corners described per window
@@ -123,6 +136,7 @@ struct FrameStats {
   int tracked = 0;                // tracks carried over from the previous frame that survived
   int retried = 0;                // tracks lost with pyramid_levels and tried with retry_pyramid_levels
   int recovered = 0;              // ... of which the retry kept
+  int jolt_recovered = 0;         // tracks that failed twice and followed from the jolt-shifted prediction
   int lost_status = 0;            // LK failed (no convergence, too little texture)
   int lost_forward_backward = 0;  // round trip error above max_forward_backward_px
   int lost_patch_error = 0;       // LK residual above max_patch_error
@@ -133,6 +147,7 @@ struct FrameStats {
   int detected = 0;               // new tracks born in this frame
   int remap_requests = 0;
   int remapped = 0;
+  int refreshed = 0;           // tracks described again (FrontendOptions::descriptor_refresh_frames)
   int remap_refused_id = 0;    // the id is tracked now, repeated, or was never issued here
   int remap_outside = 0;       // projection outside the image
   int remap_no_candidate = 0;  // no new corner in the window

@@ -57,6 +57,9 @@ void InitOptions::Check() const {
   if (min_common_features < 8) Fail(fmt::format("init: min_common_features must be >= 8, got {}", min_common_features));
   if (min_inliers < 8) Fail(fmt::format("init: min_inliers must be >= 8, got {}", min_inliers));
   if (min_points < 3) Fail(fmt::format("init: min_points must be >= 3, got {}", min_points));
+  if (!(min_shared_fraction > 0 && min_shared_fraction <= 1))
+    Fail(fmt::format("init: min_shared_fraction must be in (0, 1], got {}", min_shared_fraction));
+  if (min_count_floor < 8) Fail(fmt::format("init: min_count_floor must be >= 8, got {}", min_count_floor));
   if (!(min_median_parallax_deg >= 0)) Fail(fmt::format("init: min_median_parallax_deg must be >= 0, got {}", min_median_parallax_deg));
   if (!(ransac_threshold_px > 0)) Fail(fmt::format("init: ransac_threshold_px must be > 0, got {}", ransac_threshold_px));
   if (!(settle_parallax_deg >= 0 && settle_parallax_deg < 90))
@@ -204,7 +207,7 @@ double System::ParallaxFromReference(int slot) const {
     parallax.push_back(geometry::ParallaxDeg(pair, p->position_in_world));
   }
   // Too few points shared with the reference to say: the view has moved on, as far as the start can tell.
-  if (parallax.size() < static_cast<size_t>(options_.init.min_points)) return std::numeric_limits<double>::infinity();
+  if (parallax.size() < static_cast<size_t>(init_min_points_)) return std::numeric_limits<double>::infinity();
   return UpperMedian(parallax);
 }
 
@@ -474,13 +477,19 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
       motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
     }
   };
+  // The counts asked for, lowered where the frame tracks few features (InitOptions::min_shared_fraction).
+  const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
+                                                 static_cast<double>(map_.frames[cur_slot].features.size())));
+  auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
+  const int need_common = lowered(io.min_common_features), need_inliers = lowered(io.min_inliers),
+            need_points = lowered(io.min_points);
   correspond(reference_slot_);
-  if (static_cast<int>(ids.size()) < io.min_common_features) {
+  if (static_cast<int>(ids.size()) < need_common) {
     int next = cur_slot;
     for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
       int shared = 0;
       for (const FeatureUndistorted& f : map_.frames[cur_slot].features) shared += map_.frames[s].Find(f.id) != nullptr;
-      if (shared >= io.min_common_features) next = s;
+      if (shared >= need_common) next = s;
     }
     const size_t had = ids.size();
     reference_slot_ = next;
@@ -543,12 +552,12 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   std::vector<InitHypothesis> refined;
   for (size_t k = 0; k < seeds.size(); ++k) {
     const geometry::TwoViewResult& tvr = seeds[k];
-    const bool passes = tvr.num_inliers >= io.min_inliers && tvr.num_triangulated >= io.min_points &&
+    const bool passes = tvr.num_inliers >= need_inliers && tvr.num_triangulated >= need_points &&
                         tvr.median_parallax_deg >= io.min_median_parallax_deg;
     if (!passes)
       last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
-                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, io.min_inliers,
-                                 io.min_points, io.min_median_parallax_deg);
+                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, need_inliers,
+                                 need_points, io.min_median_parallax_deg);
     // A plane's motions are judged together: one short of the gates still stands against the other.
     const bool planar_seed = k >= num_essential_seeds;
     if (!passes && !planar_seed) continue;
@@ -650,6 +659,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
   tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
   initialised_ = true;
+  init_min_points_ = need_points;
   posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
 
   out->clear();

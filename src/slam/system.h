@@ -30,6 +30,12 @@ struct InitOptions {
   int min_common_features = 40;              // fewer shared with the reference: the reference moves on
   int min_inliers = 40;                      // epipolar inliers needed
   int min_points = 30;                       // triangulated points needed
+  // A scene with little texture offers fewer features than those counts ask for, and would never initialise:
+  // each count is lowered to at most min_shared_fraction of the features the current frame tracks, down to
+  // min_count_floor (what the 8-point RANSAC, the window's refinement and the ambiguity test still decide
+  // on). A frame tracking >= 67 features (40 / 0.6) keeps the counts above.
+  double min_shared_fraction = 0.6;
+  int min_count_floor = 15;
   // Median parallax of those points, before and after the window's refinement, at least this; and after the
   // refinement at least what the tracks' noise asks for: two views of a parallax θ fix a depth to about
   // σ / (f θ) of itself (σ the features' noise, measured as the refined window's residual), which must not
@@ -268,6 +274,7 @@ class System {
   Map map_;
   bool initialised_ = false;
   int reference_slot_ = -1;
+  int init_min_points_ = 0;  // the point count the initialisation asked for (InitOptions::min_points, lowered)
   int last_posed_slot_ = -1;
   // Settling (InitOptions::settle_parallax_deg).
   bool settling_ = false;

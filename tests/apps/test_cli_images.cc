@@ -451,7 +451,9 @@ TEST(CliImagesReal, SevenScenesRedKitchen) {
 }
 
 // A map that runs dry: with the tracks dropped whenever they no longer match their birth patch
-// (--anchor-mismatch drop) and new points asked for 8 degrees of parallax, the hand-held tracks end before
+// (--anchor-mismatch drop), new points asked for 8 degrees of parallax and lost points looked for with their
+// birth descriptors only (--descriptor-refresh-frames 0: with refreshed descriptors enough of them are found
+// again that this map no longer runs dry, 300/300 even without the fallback), the hand-held tracks end before
 // they reach it; without the fallback (--starving-inliers 0) the map runs dry and every later frame is lost
 // (measured 114/300 tracked). With it (default 30) keyframes with fewer inliers take new points from
 // 2 degrees (measured 300/300).
@@ -460,7 +462,9 @@ TEST(CliImagesReal, SevenScenesMapDoesNotRunDry) {
   TempDir dir;
   testing::WriteText(dir / "camera.txt", "525 525 320 240\n");
   const std::string flags =
-      fmt::format("--camera {} --hypotheses 65536 --min-parallax-deg 8 --anchor-mismatch drop", dir / "camera.txt");
+      fmt::format("--camera {} --hypotheses 65536 --min-parallax-deg 8 --anchor-mismatch drop "
+                  "--descriptor-refresh-frames 0",
+                  dir / "camera.txt");
   const RealRun run = RunOnRealSequence(seq, dir, flags);
   if (run.report.is_null()) return;
   EXPECT_EQ(run.report["tracked"], 300) << run.output;  // measured 300, ATE 5-7 cm over seeds 1-3

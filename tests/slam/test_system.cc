@@ -1,6 +1,7 @@
 // The full back end (paper §6) on the synthetic scenario: initialisation, tracking, mapping.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <set>
 
@@ -8,6 +9,7 @@
 #include "core/random.h"
 #include "eval/trajectory_eval.h"
 #include "sim/paper_scenario.h"
+#include "sim/scenarios.h"
 #include "slam/system.h"
 
 namespace mcslam::slam {
@@ -167,13 +169,51 @@ TEST(System, PlanarSceneInitialisesFromTheHomography) {
   EXPECT_LT(err.rot_deg.mean, 1.0);
 }
 
-// The reference moves on while waiting (frame 10 keeps only 20 features, fewer than min_common_features
-// shares with frame 0, and frame 11 then shares 20 with frame 10): the map is made from frame 11 on. The
+// A scene with little texture (the sparse scenario: 26-35 points in view, against the 40 shared features the
+// initialisation asks for on a textured scene): the counts are lowered to 60 % of the features the frame tracks
+// (down to 15), so that it initialises instead of waiting for ever (issue #16).
+TEST(System, SparseSceneInitialisesFromTheFewFeaturesItHas) {
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    sim::ScenarioOptions so;
+    so.name = "sparse";
+    so.frames = 150;
+    so.noise_px = 0.5;
+    so.seed = seed;
+    const apps::SequenceInput in = apps::KnownMapInputFromSequence(sim::MakeScenario(so));
+    size_t most = 0;
+    for (const FrameObservations& f : in.frames) most = std::max(most, f.features.size());
+    ASSERT_LT(most, static_cast<size_t>(InitOptions{}.min_common_features));  // the old gate could never pass
+    apps::SlamRunResult res;
+    ASSERT_NO_THROW(res = RunSystem(in, /*gt_scale=*/false));
+    ASSERT_TRUE(res.initialised) << "seed " << seed;
+    int tracked = 0, init_frame = -1;
+    for (const FrameReport& r : res.reports) {
+      tracked += r.status == FrameStatus::kTracked;
+      if (r.initialisation && !r.note.empty() && init_frame < 0) init_frame = static_cast<int>(r.index);
+    }
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    std::printf("[ sparse   ] seed %d: %zu features at most, initialised at frame %d, %d of 150 tracked, ATE mean "
+                "%.4f m, rotation mean %.3f deg\n",
+                static_cast<int>(seed), most, init_frame, tracked, err.ate_m.mean, err.rot_deg.mean);
+    // Measured over seeds 1-8 (CLI, the same options but 2^18 hypotheses): initialised at frames 14-44,
+    // every frame tracked, 0.9-1.2 cm and 0.25-1.0 deg mean. Bounds: the robustness matrix's 30 % of the
+    // frames for the start; twice the largest measured error.
+    EXPECT_LE(init_frame, 45) << "seed " << seed;
+    EXPECT_EQ(tracked, 150) << "seed " << seed;
+    EXPECT_FALSE(err.mirrored) << "seed " << seed;
+    EXPECT_LT(err.ate_m.mean, 0.024) << "seed " << seed;
+    EXPECT_LT(err.rot_deg.mean, 2.0) << "seed " << seed;
+  }
+}
+
+// The reference moves on while waiting (frame 10 keeps only 12 features, fewer than the 15 that the lowered
+// min_common_features asks of a frame tracking so few, and frame 11 then shares 12 with frame 10, fewer than
+// the 40 it asks of a frame tracking ~190): the map is made from frame 11 on. The
 // frames before it see the same points and are placed against the first map: every frame has a pose, those
 // as accurate as the rest. Without it they stay unposed.
 TEST(System, FramesBeforeAMovedReferenceArePosedAgainstTheFirstMap) {
   apps::SequenceInput in = Scenario(120, 0.0, 0.0);
-  in.frames[10].features.resize(20);
+  in.frames[10].features.resize(12);
   for (bool pose_before : {true, false}) {
     SystemOptions o = FastOptions();
     o.init.pose_frames_before_reference = pose_before;
