@@ -231,6 +231,8 @@ void FrontendOptions::Check() const {
     fail(fmt::format("kalman_measurement_sigma_px must be positive (got {})", kalman_measurement_sigma_px));
   if (!(init_velocity_radius_px >= 0) || !std::isfinite(init_velocity_radius_px))
     fail(fmt::format("init_velocity_radius_px must be >= 0 (got {})", init_velocity_radius_px));
+  if (!(jolt_min_failed_fraction >= 0 && jolt_min_failed_fraction <= 1))
+    fail(fmt::format("jolt_min_failed_fraction must be in [0, 1] (got {})", jolt_min_failed_fraction));
   if (!(jolt_min_shift_px >= 0) || !std::isfinite(jolt_min_shift_px))
     fail(fmt::format("jolt_min_shift_px must be >= 0 (got {})", jolt_min_shift_px));
   if (descriptor_refresh_frames < 0)
@@ -426,11 +428,14 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     // that the round trip confirms. The image's global shift, measured by phase correlation of a coarse
     // pyramid level (the whole image: it needs no track to have followed), gives the tracks that failed
     // twice a last try from where that shift puts them, when it is jolt_min_shift_px away from their
-    // prediction.
+    // prediction. Only when a good part of the tracks failed together: a jolt loses most of them at once,
+    // while a few failures are occlusions and changes of look (a car's forward motion) that no global shift
+    // explains, and retrying those only gives LK another chance to settle somewhere wrong.
     std::vector<size_t> failed;
     for (size_t i = 0; i < n; ++i)
       if (outcome[i] == kStatus || outcome[i] == kForwardBackward) failed.push_back(i);
-    if (o.jolt_recovery && !failed.empty()) {
+    if (o.jolt_recovery && !failed.empty() &&
+        static_cast<double>(failed.size()) >= o.jolt_min_failed_fraction * static_cast<double>(n)) {
       const int level = std::min(2, static_cast<int>(std::min(pyramid.size(), prev_pyramid.size()) / 2) - 1);
       if (level >= 0) {
         cv::Mat a, c;

@@ -59,6 +59,7 @@ void InitOptions::Check() const {
   if (min_points < 3) Fail(fmt::format("init: min_points must be >= 3, got {}", min_points));
   if (!(min_shared_fraction > 0 && min_shared_fraction <= 1))
     Fail(fmt::format("init: min_shared_fraction must be in (0, 1], got {}", min_shared_fraction));
+  if (min_window_frames < 2) Fail(fmt::format("init: min_window_frames must be >= 2, got {}", min_window_frames));
   if (min_count_floor < 8) Fail(fmt::format("init: min_count_floor must be >= 8, got {}", min_count_floor));
   if (!(min_median_parallax_deg >= 0)) Fail(fmt::format("init: min_median_parallax_deg must be >= 0, got {}", min_median_parallax_deg));
   if (!(ransac_threshold_px > 0)) Fail(fmt::format("init: ransac_threshold_px must be > 0, got {}", ransac_threshold_px));
@@ -510,6 +511,10 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   // as well as the right one.
   std::vector<int> window;
   for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
+  if (static_cast<int>(window.size()) < io.min_window_frames)
+    return note(fmt::format("{} frames since the reference (the window needs {}: two views leave the depth "
+                            "reversal open)",
+                            window.size(), io.min_window_frames));
   const double focal = focal_px_;
   std::string last_failure;
   geometry::TwoViewOptions tv;
