@@ -36,7 +36,7 @@ struct ReprojectionError {
     T p[3];
     ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
     p[0] += t[0], p[1] += t[1], p[2] += t[2];
-    if (!(p[2] > T(1e-9))) return false;  // behind the camera: Ceres rejects the step
+    if (!(p[2] > T(1e-9))) return false;  // a step that puts it behind the camera: Ceres rejects the step
     r[0] = T(f) * (p[0] / p[2] - T(u));
     r[1] = T(f) * (p[1] / p[2] - T(v));
     return true;
@@ -74,6 +74,10 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
   for (const BundleObservation& o : obs) {
     if (o.camera < 0 || o.camera >= static_cast<int>(cams.size()) || o.point < 0 || o.point >= static_cast<int>(pts.size()))
       throw std::invalid_argument("bundle adjustment: observation index out of range");
+    if (!std::isfinite(ReprojectionErrorPx(cams[o.camera], pts[o.point], o.uv_norm, options.focal_px))) {
+      ++out.left_out_behind;
+      continue;
+    }
     auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 4, 3, 3>(
         new ReprojectionError(o.uv_norm, options.focal_px));
     ceres::LossFunction* loss = options.cauchy ? static_cast<ceres::LossFunction*>(new ceres::CauchyLoss(options.huber_px))

@@ -36,6 +36,9 @@ struct BundleAdjustSummary {
   bool converged = false;
   int iterations = 0;
   double initial_rms_px = 0, final_rms_px = 0;  // over all observations
+  // Observations whose point starts behind (or on) its camera: no pixel residual exists for them, and one
+  // such residual at the start would make Ceres give up the whole adjustment, so they are left out of it.
+  int left_out_behind = 0;
   std::string report;                           // Ceres' brief report
 };
 

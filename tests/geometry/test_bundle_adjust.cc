@@ -50,6 +50,29 @@ TEST(BundleAdjust, RecoversPerturbedPosesAndPoints) {
   }
 }
 
+// One point that starts behind a camera (a wrong match triangulated from little parallax can end there):
+// its observation by that camera has no residual and is left out; without that, Ceres gave up the whole
+// adjustment at its first evaluation ("Residual and Jacobian evaluation failed") and nothing moved.
+TEST(BundleAdjust, APointBehindACameraDoesNotStopTheAdjustment) {
+  const Scene truth;
+  std::vector<Pose> cams = truth.cams;
+  std::vector<Eigen::Vector3d> pts = truth.pts;
+  CounterRng rng(4, 0);
+  for (size_t c = 2; c < cams.size(); ++c)
+    cams[c] = Pose(cams[c].q, cams[c].t + Eigen::Vector3d(0.01 * rng.Normal(), 0.01 * rng.Normal(), 0.01 * rng.Normal()));
+  pts[7] = Eigen::Vector3d(0.1, 0.0, -1.0);  // behind every camera
+  std::vector<bool> fixed(cams.size(), false);
+  fixed[0] = fixed[1] = true;
+  BundleAdjustOptions o;
+  o.max_iterations = 100;
+  const BundleAdjustSummary s = BundleAdjust(cams, pts, truth.obs, fixed, o);
+  EXPECT_EQ(s.left_out_behind, 8);  // point 7 in each of the 8 cameras
+  EXPECT_TRUE(s.converged) << s.report;
+  for (size_t c = 0; c < cams.size(); ++c) {
+    EXPECT_LT((cams[c].t - truth.cams[c].t).norm(), 1e-4) << c;  // exact data: the other 149 points fix them
+  }
+}
+
 TEST(Pnp, RecoversAPoseWithOutliers) {
   const Scene sc;
   std::vector<Eigen::Vector2d> uv;
