@@ -4,6 +4,7 @@
 #include <exception>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 #include <fmt/format.h>
@@ -56,6 +57,11 @@ void RunEval(const EvalArgs& a) {
   options.association.max_dt_s = a.max_dt_s;
   options.rpe_delta = a.delta;
   const eval::TrajectoryErrors errors = eval::EvaluateTrajectory(gt, est, options);
+  // RPE compares poses delta apart: with fewer matched poses there is no pair, and its figures would be NaN.
+  if (static_cast<size_t>(a.delta) >= errors.matched())
+    throw std::invalid_argument(fmt::format("--delta {}: only {} poses matched, and the relative pose error needs "
+                                            "pairs of poses that many apart (give --delta below {})",
+                                            a.delta, errors.matched(), errors.matched()));
 
   if (errors.matched() < est.size())
     std::fprintf(stderr, "mcslam eval: note: %zu of %zu estimated poses have no ground truth and are not scored\n",

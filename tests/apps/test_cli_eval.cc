@@ -153,6 +153,28 @@ TEST(CliEval, BadFlagsNameTheFlag) {
   }
 }
 
+// RPE over a delta as long as the run or longer has no pair of poses: an error naming the flag, not
+// rpe_trans_rmse=nan with exit 0 (issue #20).
+TEST(CliEval, DeltaBeyondTheRunIsAnError) {
+  TempDir dir;
+  io::WriteTum(dir / "gt.txt", MakeGroundTruth());  // 100 poses
+  std::string files = " ";
+  files += dir / "gt.txt";
+  files += " ";
+  files += dir / "gt.txt";
+  for (const int delta : {100, 100000}) {
+    const auto r = RunMcslam("eval" + files + " --delta " + std::to_string(delta));
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("--delta " + std::to_string(delta) + ": only 100 poses matched"), std::string::npos)
+        << r.output;
+    EXPECT_EQ(r.output.find("matched="), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("nan"), std::string::npos) << r.output;
+  }
+  const auto ok = RunMcslam("eval" + files + " --delta 99");
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_EQ(ok.output.find("nan"), std::string::npos) << ok.output;
+}
+
 TEST(CliEval, NoOverlapIsAnError) {
   TempDir dir;
   const io::Trajectory gt = MakeGroundTruth();
