@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "apps/commands.h"
+#include "apps/options.h"
 #include "sim/paper_scenario.h"
 #include "sim/render.h"
 #include "sim/scenarios.h"
@@ -46,20 +47,6 @@ CLI::Validator FiniteNumber(double lo, bool lo_open, double hi, const std::strin
         return "";
       },
       wanted, "");
-}
-
-// Digits only, fitting 64 bits: CLI11 would otherwise wrap "-3" or saturate a too long number silently.
-CLI::Validator UnsignedInteger() {
-  return CLI::Validator(
-      [](std::string& text) -> std::string {
-        if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos)
-          return "must be an integer >= 0, got " + text;
-        errno = 0;
-        std::strtoull(text.c_str(), nullptr, 10);
-        if (errno == ERANGE) return "must fit in 64 bits, got " + text;
-        return "";
-      },
-      "integer >= 0", "");
 }
 
 void RunSynth(SynthArgs& a) {

@@ -1,16 +1,31 @@
 #include "apps/options.h"
 
 #include <atomic>
+#include <cerrno>
+#include <cstdlib>
 #include <csignal>
 #include <stdexcept>
 
 namespace mcslam::apps {
 
+CLI::Validator UnsignedInteger() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos)
+          return "must be an integer >= 0, got " + text;
+        errno = 0;
+        std::strtoull(text.c_str(), nullptr, 10);
+        if (errno == ERANGE) return "must fit in 64 bits, got " + text;
+        return "";
+      },
+      "integer >= 0", "");
+}
+
 void PoseFlags::Add(CLI::App* cmd) {
   cmd->add_option("--hypotheses", tracker.hypotheses, "Pose hypotheses per frame (the paper: 2^18)")
       ->check(CLI::Range(1, 1 << 26))
       ->capture_default_str();
-  cmd->add_option("--seed", tracker.seed, "Random seed")->capture_default_str();
+  cmd->add_option("--seed", tracker.seed, "Random seed")->check(UnsignedInteger())->capture_default_str();
   cmd->add_option("--random", random, "Random numbers: 'table' (the paper's, made once) or 'fresh' (new each frame)")
       ->check(CLI::IsMember({"table", "fresh"}))
       ->capture_default_str();

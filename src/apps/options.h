@@ -11,6 +11,10 @@
 
 namespace mcslam::apps {
 
+// Digits only, fitting 64 bits: CLI11 would otherwise wrap "-3" to 2^64 - 3 or saturate a too long number
+// silently (a seed, a count).
+CLI::Validator UnsignedInteger();
+
 // Flags of the Monte Carlo pose estimator (--hypotheses, --seed, --random, --rounds, ...).
 struct PoseFlags {
   slam::PoseTrackerOptions tracker;

@@ -101,6 +101,13 @@ TEST(CliRun, BadInputIsAClearError) {
   r = RunMcslam("run " + dir / "t --known-map --hypotheses 0 --out " + dir / "r");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--hypotheses"), std::string::npos) << r.output;
+
+  // A negative seed is refused, not wrapped to 2^64 - 1 (issue #20); so is one past 64 bits.
+  for (const std::string seed : {"-1", "18446744073709551616"}) {
+    r = RunMcslam("run " + dir / "t --seed " + seed + " --out " + dir / "r");
+    EXPECT_NE(r.exit_code, 0) << seed;
+    EXPECT_NE(r.output.find("--seed"), std::string::npos) << r.output;
+  }
 }
 
 TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
