@@ -158,7 +158,7 @@ void RunFullSlam(const RunArgs& a) {
   line += RunTimesFields(res.times);
   WriteReportJson((out / "report.json").string(), j);
   fmt::print("{}\n", line);
-  if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
+  if (Interrupted()) throw std::runtime_error(InterruptedMessage());
   if (!res.initialised)
     throw std::runtime_error(fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
@@ -240,7 +240,7 @@ void Run(const RunArgs& a) {
   line += RunTimesFields(times);
   WriteReportJson((std::filesystem::path(a.out) / "report.json").string(), j);
   fmt::print("{}\n", line);
-  if (Interrupted()) throw std::runtime_error("interrupted by the user (outputs written)");
+  if (Interrupted()) throw std::runtime_error(InterruptedMessage());
 }
 
 }  // namespace

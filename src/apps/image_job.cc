@@ -983,7 +983,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::fflush(stdout);
 
   if (!failure.empty()) throw std::runtime_error(fmt::format("{} (outputs so far written to {})", failure, out_dir));
-  if (interrupted) throw std::runtime_error("interrupted by the user (outputs written)");
+  if (interrupted) throw std::runtime_error(InterruptedMessage());
   if (!sum.initialised)
     throw std::runtime_error(fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "

@@ -5,6 +5,9 @@
 #include <cstdlib>
 #include <csignal>
 #include <stdexcept>
+#include <string>
+
+#include <fmt/format.h>
 
 namespace mcslam::apps {
 
@@ -105,13 +108,22 @@ std::unique_ptr<compute::PointKernel> MakePointKernelFor(const std::string& back
 }
 
 namespace {
-std::atomic<bool> g_interrupted{false};  // the one piece of global state: a signal handler can reach nothing else
-extern "C" void OnSigint(int) {
-  if (g_interrupted.exchange(true)) std::_Exit(130);
+// The one piece of global state: a signal handler can reach nothing else. 0: none yet, else the signal.
+std::atomic<int> g_signal{0};
+extern "C" void OnStopSignal(int sig) {
+  if (g_signal.exchange(sig) != 0) std::_Exit(128 + sig);  // the second one: stop now
 }
 }  // namespace
 
-void InstallInterruptHandler() { std::signal(SIGINT, OnSigint); }
-bool Interrupted() { return g_interrupted.load(); }
+void InstallInterruptHandler() {
+  std::signal(SIGINT, OnStopSignal);
+  std::signal(SIGTERM, OnStopSignal);
+}
+bool Interrupted() { return g_signal.load() != 0; }
+std::string InterruptedMessage() {
+  const int sig = g_signal.load();
+  return fmt::format("interrupted by {} (outputs written)", sig == SIGTERM ? "SIGTERM" : sig == SIGINT ? "Ctrl-C (SIGINT)"
+                                                                                                  : "a signal");
+}
 
 }  // namespace mcslam::apps

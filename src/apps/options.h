@@ -29,8 +29,10 @@ std::unique_ptr<compute::PoseKernel> MakePoseKernelFor(const std::string& backen
 std::unique_ptr<compute::PointKernel> MakePointKernelFor(const std::string& backend);
 void AddBackendFlag(CLI::App* cmd, std::string* backend);
 
-// Ctrl-C: the first SIGINT asks the running job to stop and write what it has; a second one kills.
+// Ctrl-C (SIGINT) and SIGTERM (what `timeout`, `kill` and job schedulers send): the first asks the running
+// job to stop and write what it has; a second one kills.
 void InstallInterruptHandler();
 bool Interrupted();
+std::string InterruptedMessage();  // "interrupted by SIGTERM (outputs written)", ...
 
 }  // namespace mcslam::apps

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -108,6 +110,35 @@ TEST(CliRun, BadInputIsAClearError) {
     EXPECT_NE(r.exit_code, 0) << seed;
     EXPECT_NE(r.output.find("--seed"), std::string::npos) << r.output;
   }
+}
+
+// SIGTERM (what `timeout`, `kill` and job schedulers send) stops a run like Ctrl-C: what was done is written,
+// report.json says it was interrupted, and the exit is non-zero with a message naming the signal (issue #20:
+// the output folder was left empty).
+TEST(CliRun, SigtermWritesWhatWasDone) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 3000 --out " + dir / "s").exit_code, 0);
+  // The shell starts the run, waits 3 s (the handler is installed once the input is read, well before), then
+  // sends SIGTERM and reports the run's exit status.
+  const std::string cmd = std::string(MCSLAM_BIN) + " run " + dir / "s" + " --out " + dir / "r" + " > " +
+                          dir / "log.txt" + " 2>&1 & pid=$!; sleep 3; kill -TERM $pid; wait $pid; echo rc=$?";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string out;
+  char buf[256];
+  while (fgets(buf, sizeof buf, pipe)) out += buf;
+  pclose(pipe);
+  ASSERT_TRUE(std::filesystem::exists(dir / "r/report.json")) << out << ReadText(dir / "log.txt");
+  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+  if (!report["interrupted"].get<bool>()) GTEST_SKIP() << "the run finished its 3000 frames within 3 s";
+  EXPECT_EQ(out, "rc=1\n") << ReadText(dir / "log.txt");
+  EXPECT_NE(ReadText(dir / "log.txt").find("interrupted by SIGTERM (outputs written)"), std::string::npos);
+  const int frames = report["frames"].get<int>();
+  EXPECT_GT(frames, 0);
+  EXPECT_LT(frames, 3000);
+  // Every frame done is in the trajectory (one line each, after the header).
+  const std::string traj = ReadText(dir / "r/trajectory.txt");
+  EXPECT_EQ(std::count(traj.begin(), traj.end(), '\n'), frames + 1) << traj.substr(0, 200);
 }
 
 TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
