@@ -435,8 +435,9 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
                   "content; a folder with observations.txt is run as observations)")
       ->capture_default_str();
   cmd->add_option("--camera", o->camera_path,
-                  "Camera file replacing the dataset's: YAML (ORB-SLAM or mcslam style) or a text line 'fx fy cx cy "
-                  "[k1 k2 p1 p2 [k3]]' (image size from the frames)");
+                  "Camera replacing the dataset's: a YAML file (ORB-SLAM or mcslam style), a text file with the line "
+                  "'fx fy cx cy [k1 k2 p1 p2 [k3]]', a KITTI calib.txt (its P0 line), or those numbers given inline "
+                  "in quotes (image size from the frames)");
   cmd->add_option("--gt", o->gt_path, "Ground truth replacing the dataset's (TUM, KITTI or EuRoC file, world_from_cam)");
   cmd->add_option("--format", o->format, "Trajectory format: tum (trajectory.txt) or kitti (also trajectory_kitti.txt + times)")
       ->check(CLI::IsMember({"tum", "kitti"}))
@@ -496,8 +497,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     dopt.kind = io::DatasetKind::kWebcam;  // "mcslam run 0": the first webcam
   dopt.camera_path = options.camera_path;
   dopt.fps = options.fps;
-  if (!options.camera_path.empty() && !fs::is_regular_file(options.camera_path, ec))
-    throw std::runtime_error(fmt::format("--camera {}: the file does not exist", options.camera_path));
+  // --camera: a file, or the numbers inline ("fx fy cx cy ..."); io::OpenDataset tells which, or says neither.
+  if (!options.camera_path.empty() && fs::is_directory(options.camera_path, ec))
+    throw std::runtime_error(fmt::format("--camera {}: a folder, not a camera file", options.camera_path));
   if (!options.gt_path.empty() && !fs::is_regular_file(options.gt_path, ec))
     throw std::runtime_error(fmt::format("--gt {}: the file does not exist", options.gt_path));
   io::Dataset data = io::OpenDataset(input, dopt);

@@ -8,9 +8,11 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <regex>
 #include <stdexcept>
 #include <system_error>
+#include <vector>
 
 #include "io/camera_io.h"
 #include "io/text_util.h"
@@ -71,11 +73,59 @@ cv::Size RequireImageSize(ImageSource& source, const std::string& path) {
   return *size;
 }
 
+PinholeCamera ReadKittiCalib(const std::string& path, int cam, const cv::Size& size);
+
+// "fx fy cx cy [k1 k2 p1 p2 [k3]]" given inline (the text of --camera): the numbers, or nullopt when the text
+// is not 4, 8 or 9 numbers.
+std::optional<std::vector<double>> InlineCameraNumbers(const std::string& text) {
+  const auto tok = detail::SplitWhitespace(text);
+  if (tok.size() != 4 && tok.size() != 8 && tok.size() != 9) return std::nullopt;
+  std::vector<double> v;
+  for (auto t : tok) {
+    double x = 0;
+    if (!detail::TryParseDouble(t, &x)) return std::nullopt;
+    v.push_back(x);
+  }
+  return v;
+}
+
+// The first data line of a text file has 12 numbers (or "P<k>:" and 12): a KITTI calib.txt.
+bool LooksLikeKittiCalib(const std::string& path) {
+  LineReader r(path);
+  std::string line;
+  while (r.Next(line)) {
+    if (detail::IsBlankOrComment(line)) continue;
+    const auto tok = detail::SplitWhitespace(line);
+    return tok.size() == 12 || (tok.size() == 13 && !tok[0].empty() && tok[0].back() == ':');
+  }
+  return false;
+}
+
 PinholeCamera ReadCameraFile(const std::string& path, ImageSource& source, const std::string& dataset_path) {
   const std::string ext = Lower(fs::path(path).extension().string());
   if (ext == ".yaml" || ext == ".yml") return ReadCameraYaml(path);
-  if (!IsFile(path)) throw std::runtime_error(fmt::format("{}: camera file does not exist", path));
+  if (!IsFile(path)) {
+    const std::optional<std::vector<double>> v = InlineCameraNumbers(path);
+    if (!v)
+      throw std::runtime_error(fmt::format(
+          "camera '{}': no such file, nor 'fx fy cx cy [k1 k2 p1 p2 [k3]]' given inline (4, 8 or 9 numbers)", path));
+    const cv::Size size = RequireImageSize(source, dataset_path);
+    std::vector<double> n = *v;
+    n.resize(9, 0.0);
+    for (double x : n)
+      if (!std::isfinite(x)) throw std::runtime_error(fmt::format("camera '{}': {} is not finite", path, x));
+    PinholeCamera camera(n[0], n[1], n[2], n[3], size.width, size.height, Distortion{n[4], n[5], n[6], n[7], n[8]});
+    try {
+      camera.Check();
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(fmt::format("camera '{}': {}", path, e.what()));
+    }
+    return camera;
+  }
   const cv::Size size = RequireImageSize(source, dataset_path);
+  // A KITTI calib.txt: its P0 line (the left grey camera; a KITTI folder given as the input picks P0 or P2 by
+  // its images).
+  if (LooksLikeKittiCalib(path)) return ReadKittiCalib(path, 0, size);
   return ReadCameraText(path, size.width, size.height);
 }
 

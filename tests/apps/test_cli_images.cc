@@ -290,6 +290,36 @@ TEST(CliImages, MissingOrMismatchedCameraIsAnErrorBeforeAnyWork) {
   EXPECT_NE(r.output.find("nothing.yaml"), std::string::npos) << r.output;
 }
 
+// --camera takes what its help promises (issue #20): the numbers inline in quotes, and a KITTI calib.txt (its
+// P0 line, with or without the "P0:" prefix); text that is neither a file nor 4, 8 or 9 numbers is an error
+// naming it.
+TEST(CliImages, CameraGivenInlineOrAsAKittiCalib) {
+  TempDir dir;
+  const std::string folder = WriteImageFolder(dir, "room", /*with_camera=*/false);
+  auto camera_of = [&](const std::string& camera, const std::string& out) {
+    const auto r = RunMcslam(fmt::format("run {} --camera {} --end 3 --out {}", folder, camera, dir / out));
+    const std::string report = dir / (out + "/report.json");
+    EXPECT_TRUE(fs::exists(report)) << r.output;
+    return ReadJson(report)["camera"];
+  };
+  nlohmann::json c = camera_of("\"400 400 239.5 179.5\"", "inline");
+  EXPECT_EQ(c["fx"].get<double>(), 400.0);
+  EXPECT_EQ(c["cy"].get<double>(), 179.5);
+  EXPECT_EQ(c["width"].get<int>(), 480);  // from the frames
+  testing::WriteText(dir / "calib.txt", "P0: 400 0 239.5 0 0 400 179.5 0 0 0 1 0\nP1: 400 0 239.5 -200 0 400 179.5 0 0 0 1 0\n");
+  c = camera_of(dir / "calib.txt", "kitti");
+  EXPECT_EQ(c["fx"].get<double>(), 400.0);
+  EXPECT_EQ(c["cx"].get<double>(), 239.5);
+  testing::WriteText(dir / "bare.txt", "400 0 239.5 0 0 400 179.5 0 0 0 1 0\n");
+  c = camera_of(dir / "bare.txt", "bare");
+  EXPECT_EQ(c["fy"].get<double>(), 400.0);
+
+  const auto r = RunMcslam(fmt::format("run {} --camera \"400 400 239.5\" --out {}", folder, dir / "bad"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("camera '400 400 239.5': no such file, nor"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "bad/report.json"));
+}
+
 TEST(CliImages, VideoThatCannotBeOpenedIsAClearError) {
   TempDir dir;
   testing::WriteText(dir / "broken.mp4", "not a video at all");
