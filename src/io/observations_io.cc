@@ -27,6 +27,9 @@ std::vector<ObservationFrame> ReadObservations(const std::string& path) {
     const double stamp_s = detail::ParseFinite(tok[1], r, "timestamp_s");
 
     if (frames.empty() || index > frames.back().index) {
+      if (!frames.empty() && stamp_s < frames.back().stamp_s)
+        r.Fail(fmt::format("timestamp {} of frame {} goes back in time (frame {} has {})", tok[1], index,
+                           frames.back().index, detail::FormatStamp(frames.back().stamp_s)));
       frames.push_back(ObservationFrame{index, stamp_s, {}});
       ids_in_frame.clear();
     } else if (index < frames.back().index) {
@@ -58,6 +61,8 @@ void WriteObservations(const std::string& path, const std::vector<ObservationFra
                                               path, i, f.index));
     if (!std::isfinite(f.stamp_s))
       throw std::invalid_argument(fmt::format("{}: frame {} has a non-finite timestamp", path, f.index));
+    if (i > 0 && f.stamp_s < frames[i - 1].stamp_s)
+      throw std::invalid_argument(fmt::format("{}: the timestamp of frame {} goes back in time", path, f.index));
     std::unordered_set<int64_t> ids;
     for (const Observation& o : f.observations) {
       if (!std::isfinite(o.u_px) || !std::isfinite(o.v_px))

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "io/camera_io.h"
+#include "io/image_source.h"
 #include "io/observations_io.h"
 #include "io/ply.h"
 #include "../test_util.h"
@@ -307,6 +308,14 @@ TEST(Observations, ErrorsNameFileAndLine) {
   ExpectThrowsWith([&] { ReadObservations(p); }, p + ":1:", "not an integer");
   WriteText(p, "-1 0.0 1 10 20\n");
   ExpectThrowsWith([&] { ReadObservations(p); }, p + ":1:", "negative");
+  // A timestamp going backwards (issue #20: it was accepted and written to the trajectory).
+  WriteText(p, "0 0.5 1 10 20\n1 0.2 1 10 20\n");
+  ExpectThrowsWith([&] { ReadObservations(p); }, p + ":2:", "goes back in time");
+  WriteText(p, "0 0.5 1 10 20\n1 0.5 1 10 20\n");  // equal stamps: allowed (some logs round them)
+  EXPECT_EQ(ReadObservations(p).size(), 2u);
+  // The same in a times file (KITTI's times.txt, --timestamps).
+  WriteText(p, "0.0\n0.1\n0.05\n");
+  ExpectThrowsWith([&] { ReadTimestampsFile(p); }, p + ":3:", "goes back in time");
 }
 
 TEST(Observations, WriterRefusesWhatTheReaderWould) {
@@ -316,6 +325,9 @@ TEST(Observations, WriterRefusesWhatTheReaderWould) {
   EXPECT_THROW(WriteObservations(dir / "o.txt", frames), std::invalid_argument);
   frames = MakeObservations();
   frames[0].observations[1].feature_id = frames[0].observations[0].feature_id;
+  EXPECT_THROW(WriteObservations(dir / "o.txt", frames), std::invalid_argument);
+  frames = MakeObservations();
+  frames[1].stamp_s = frames[0].stamp_s - 1.0;
   EXPECT_THROW(WriteObservations(dir / "o.txt", frames), std::invalid_argument);
 }
 
