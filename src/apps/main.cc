@@ -2,11 +2,16 @@
 #include <exception>
 
 #include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
 
 int main(int argc, char** argv) {
+  // Logs and warnings on stderr; stdout carries only the results (a run's summary line, eval's figures), so
+  // that scripts can read them.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("mcslam"));
+  spdlog::set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%l] %v");
   CLI::App app{"mcslam: monocular SLAM by Monte Carlo pose and structure estimation"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "mcslam 0.1.0");

@@ -141,6 +141,29 @@ TEST(CliRun, SigtermWritesWhatWasDone) {
   EXPECT_EQ(std::count(traj.begin(), traj.end(), '\n'), frames + 1) << traj.substr(0, 200);
 }
 
+// Logs and warnings go to stderr, the results to stdout (issue #20: they were mixed on stdout): a script that
+// reads a run's stdout gets its summary line and nothing else, and the log is still there on stderr.
+TEST(CliRun, StdoutCarriesOnlyTheResult) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 30 --out " + dir / "s").exit_code, 0);
+  auto capture = [](const std::string& cmd) {
+    std::string out;
+    FILE* pipe = popen(cmd.c_str(), "r");
+    if (!pipe) return out;
+    char buf[512];
+    while (fgets(buf, sizeof buf, pipe)) out += buf;
+    pclose(pipe);
+    return out;
+  };
+  const std::string run = std::string(MCSLAM_BIN) + " run " + dir / "s" + " --hypotheses 16384 --out " + dir / "r";
+  const std::string out = capture(run + " 2>/dev/null");
+  EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+  EXPECT_EQ(out.rfind("frames=30 ", 0), 0u) << out;
+  const std::string err = capture(run + " 2>&1 >/dev/null");
+  EXPECT_NE(err.find("[info] initialised from frames"), std::string::npos) << err;
+  EXPECT_EQ(err.find("frames=30 "), std::string::npos) << err;
+}
+
 TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   TempDir dir;
   ASSERT_EQ(RunMcslam("synth --scenario paper --frames 60 --out " + dir / "s").exit_code, 0);
