@@ -43,9 +43,8 @@ struct CommandResult {
   std::string output;  // stdout and stderr together
 };
 
-// Runs `mcslam <args>` (the binary this build made) through the shell.
-inline CommandResult RunMcslam(const std::string& args) {
-  const std::string cmd = std::string(MCSLAM_BIN) + " " + args + " 2>&1";
+// Runs a shell command line; `output` is what it writes to stdout (add 2>&1 for stderr too).
+inline CommandResult RunShell(const std::string& cmd) {
   CommandResult r;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
@@ -56,6 +55,9 @@ inline CommandResult RunMcslam(const std::string& args) {
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
 }
+
+// Runs `mcslam <args>` (the binary this build made) through the shell, stdout and stderr together.
+inline CommandResult RunMcslam(const std::string& args) { return RunShell(std::string(MCSLAM_BIN) + " " + args + " 2>&1"); }
 
 inline void WriteText(const std::string& path, const std::string& text) {
   std::ofstream f(path);

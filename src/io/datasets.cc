@@ -89,6 +89,17 @@ std::optional<std::vector<double>> InlineCameraNumbers(const std::string& text) 
   return v;
 }
 
+// A camera from 'fx fy cx cy [k1 k2 p1 p2 [k3]]' (4, 8 or 9 numbers; the missing distortion terms are 0) and
+// the image size; PinholeCamera::Check's std::invalid_argument when the numbers make no camera. The text
+// camera file and the numbers given inline to --camera both come here.
+PinholeCamera CameraFromNumbers(const std::vector<double>& v, int width, int height) {
+  double n[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+  std::copy_n(v.begin(), std::min<size_t>(v.size(), 9), n);
+  PinholeCamera camera(n[0], n[1], n[2], n[3], width, height, Distortion{n[4], n[5], n[6], n[7], n[8]});
+  camera.Check();
+  return camera;
+}
+
 // The first data line of a text file has 12 numbers (or "P<k>:" and 12): a KITTI calib.txt.
 bool LooksLikeKittiCalib(const std::string& path) {
   LineReader r(path);
@@ -109,18 +120,14 @@ PinholeCamera ReadCameraFile(const std::string& path, ImageSource& source, const
     if (!v)
       throw std::runtime_error(fmt::format(
           "camera '{}': no such file, nor 'fx fy cx cy [k1 k2 p1 p2 [k3]]' given inline (4, 8 or 9 numbers)", path));
-    const cv::Size size = RequireImageSize(source, dataset_path);
-    std::vector<double> n = *v;
-    n.resize(9, 0.0);
-    for (double x : n)
+    for (double x : *v)
       if (!std::isfinite(x)) throw std::runtime_error(fmt::format("camera '{}': {} is not finite", path, x));
-    PinholeCamera camera(n[0], n[1], n[2], n[3], size.width, size.height, Distortion{n[4], n[5], n[6], n[7], n[8]});
+    const cv::Size size = RequireImageSize(source, dataset_path);
     try {
-      camera.Check();
+      return CameraFromNumbers(*v, size.width, size.height);
     } catch (const std::invalid_argument& e) {
       throw std::runtime_error(fmt::format("camera '{}': {}", path, e.what()));
     }
-    return camera;
   }
   const cv::Size size = RequireImageSize(source, dataset_path);
   // A KITTI calib.txt: its P0 line (the left grey camera; a KITTI folder given as the input picks P0 or P2 by
@@ -303,9 +310,7 @@ void OpenTum(Dataset* d, const DatasetOptions& options, bool own_camera) {
     if (detail::IsBlankOrComment(line)) continue;
     const auto tok = detail::SplitWhitespace(line);
     if (tok.size() < 2) r.Fail("expected 'timestamp filename'");
-    const double t = detail::ParseFinite(tok[0], r, "timestamp");
-    if (!stamps.empty() && t < stamps.back()) r.Fail(fmt::format("timestamp {} goes back in time", tok[0]));
-    stamps.push_back(t);
+    detail::AppendStamp(stamps, detail::ParseFinite(tok[0], r, "timestamp"), tok[0], r);
     paths.push_back((dir / std::string(tok[1])).string());
   }
   if (paths.empty()) throw std::runtime_error(fmt::format("{}: lists no image", rgb.string()));
@@ -424,9 +429,7 @@ void OpenEuroc(Dataset* d, const DatasetOptions& options, bool own_camera) {
     first = false;
     if (tok.size() < 2) r.Fail("expected 'timestamp [ns],filename'");
     const int64_t ns = detail::ParseInteger(tok[0], r, "timestamp [ns]");
-    const double t = NanosecondsToSeconds(ns);
-    if (!stamps.empty() && t < stamps.back()) r.Fail(fmt::format("timestamp {} goes back in time", tok[0]));
-    stamps.push_back(t);
+    detail::AppendStamp(stamps, NanosecondsToSeconds(ns), tok[0], r);
     paths.push_back((cam / "data" / std::string(tok[1])).string());
   }
   if (paths.empty()) throw std::runtime_error(fmt::format("{}: lists no image", csv.string()));
@@ -735,15 +738,13 @@ PinholeCamera ReadCameraText(const std::string& path, int width, int height) {
     if (tok.size() != 4 && tok.size() != 8 && tok.size() != 9)
       r.Fail(fmt::format("expected 'fx fy cx cy [k1 k2 p1 p2 [k3]]' (4, 8 or 9 numbers), found {}", tok.size()));
     static constexpr const char* kNames[9] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
-    double v[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-    for (size_t i = 0; i < tok.size(); ++i) v[i] = detail::ParseFinite(tok[i], r, kNames[i]);
-    PinholeCamera camera(v[0], v[1], v[2], v[3], width, height, Distortion{v[4], v[5], v[6], v[7], v[8]});
+    std::vector<double> v;
+    for (size_t i = 0; i < tok.size(); ++i) v.push_back(detail::ParseFinite(tok[i], r, kNames[i]));
     try {
-      camera.Check();
+      return CameraFromNumbers(v, width, height);
     } catch (const std::invalid_argument& e) {
       r.Fail(e.what());
     }
-    return camera;
   }
   detail::Fail(path, "no camera line (expected 'fx fy cx cy [k1 k2 p1 p2 [k3]]')");
 }

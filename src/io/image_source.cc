@@ -106,9 +106,7 @@ std::vector<double> ReadTimestampsFile(const std::string& path) {
     if (detail::IsBlankOrComment(line)) continue;
     const auto tok = detail::SplitWhitespace(line);
     // Some tools add columns after the stamp (e.g. a file name); the first column is the stamp.
-    const double t = detail::ParseFinite(tok[0], r, "timestamp");
-    if (!stamps.empty() && t < stamps.back()) r.Fail(fmt::format("timestamp {} goes back in time", tok[0]));
-    stamps.push_back(t);
+    detail::AppendStamp(stamps, detail::ParseFinite(tok[0], r, "timestamp"), tok[0], r);
   }
   return stamps;
 }

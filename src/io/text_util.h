@@ -110,6 +110,12 @@ inline double ParseFinite(std::string_view tok, const LineReader& r, std::string
   return v;
 }
 
+// Appends the stamp t (read from the text `tok`) to `stamps`, or fails naming it when it goes back in time.
+inline void AppendStamp(std::vector<double>& stamps, double t, std::string_view tok, const LineReader& r) {
+  if (!stamps.empty() && t < stamps.back()) r.Fail(fmt::format("timestamp {} goes back in time", tok));
+  stamps.push_back(t);
+}
+
 inline int64_t ParseInteger(std::string_view tok, const LineReader& r, std::string_view field) {
   int64_t v = 0;
   if (!TryParseInt(tok, &v)) r.Fail(fmt::format("{} '{}' is not an integer", field, tok));

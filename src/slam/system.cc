@@ -20,6 +20,15 @@ namespace mcslam::slam {
 
 namespace {
 
+// The noise σ of a feature (px, per coordinate) from a median reprojection residual: 1.1774 σ for Gaussian noise.
+double NoiseFromMedianResidualPx(double median_residual_px) { return median_residual_px / 1.1774; }
+
+// The parallax (degrees) at which two views fix a point's depth to `relative_depth_noise` of itself: a parallax
+// θ fixes it to about σ / (f θ). Used for the first map and for new points alike.
+double ParallaxForDepthNoiseDeg(double noise_px, double focal_px, double relative_depth_noise) {
+  return RadToDeg(noise_px / (focal_px * relative_depth_noise));
+}
+
 double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -435,9 +444,9 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   const Pose ends[2] = {h.poses.front(), h.poses.back()};
   for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
   const double refined_parallax = UpperMedian(parallax);
-  const double noise_px = h.median_px / 1.1774;
-  const double needed = std::max(io.min_median_parallax_deg,
-                                 noise_px / (focal * io.max_relative_depth_noise) * 180.0 / M_PI);
+  const double noise_px = NoiseFromMedianResidualPx(h.median_px);
+  const double needed =
+      std::max(io.min_median_parallax_deg, ParallaxForDepthNoiseDeg(noise_px, focal, io.max_relative_depth_noise));
   h.parallax_ok = refined_parallax >= needed;
   if (check_parallax && !h.parallax_ok)
     return fail(fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg (the tracks' noise, {:.2f} px, "
@@ -799,8 +808,9 @@ int System::TriangulateNewPoints(int slot, int inliers) {
   const double noise_px =
       recent_residual_px_.empty()
           ? 0.0
-          : UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())) / 1.1774;
-  noise_parallax_deg_ = std::min(noise_px / (focal_px_ * mo.max_relative_depth_noise) * 180.0 / M_PI,
+          : NoiseFromMedianResidualPx(
+                UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())));
+  noise_parallax_deg_ = std::min(ParallaxForDepthNoiseDeg(noise_px, focal_px_, mo.max_relative_depth_noise),
                                  mo.max_noise_parallax_deg);
   const double wanted = std::max(mo.min_parallax_deg, noise_parallax_deg_);
   to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(wanted, mo.starving_parallax_deg) : wanted;

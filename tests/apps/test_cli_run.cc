@@ -122,12 +122,7 @@ TEST(CliRun, SigtermWritesWhatWasDone) {
   // sends SIGTERM and reports the run's exit status.
   const std::string cmd = std::string(MCSLAM_BIN) + " run " + dir / "s" + " --out " + dir / "r" + " > " +
                           dir / "log.txt" + " 2>&1 & pid=$!; sleep 3; kill -TERM $pid; wait $pid; echo rc=$?";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  ASSERT_NE(pipe, nullptr);
-  std::string out;
-  char buf[256];
-  while (fgets(buf, sizeof buf, pipe)) out += buf;
-  pclose(pipe);
+  const std::string out = testing::RunShell(cmd).output;
   ASSERT_TRUE(std::filesystem::exists(dir / "r/report.json")) << out << ReadText(dir / "log.txt");
   const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
   if (!report["interrupted"].get<bool>()) GTEST_SKIP() << "the run finished its 3000 frames within 3 s";
@@ -146,15 +141,7 @@ TEST(CliRun, SigtermWritesWhatWasDone) {
 TEST(CliRun, StdoutCarriesOnlyTheResult) {
   TempDir dir;
   ASSERT_EQ(RunMcslam("synth --scenario paper --frames 30 --out " + dir / "s").exit_code, 0);
-  auto capture = [](const std::string& cmd) {
-    std::string out;
-    FILE* pipe = popen(cmd.c_str(), "r");
-    if (!pipe) return out;
-    char buf[512];
-    while (fgets(buf, sizeof buf, pipe)) out += buf;
-    pclose(pipe);
-    return out;
-  };
+  auto capture = [](const std::string& cmd) { return testing::RunShell(cmd).output; };
   const std::string run = std::string(MCSLAM_BIN) + " run " + dir / "s" + " --hypotheses 16384 --out " + dir / "r";
   const std::string out = capture(run + " 2>/dev/null");
   EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
