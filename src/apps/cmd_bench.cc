@@ -291,9 +291,9 @@ void RegisterBench(CLI::App& app) {
       "sweep", "Mean translation and rotation error of known-map tracking on the noisy paper scenario against 2^k hypotheses");
   sweep->add_option("--min-log2", sa->min_log2, "Smallest log2(hypotheses)")->check(CLI::Range(1, 24))->capture_default_str();
   sweep->add_option("--max-log2", sa->max_log2, "Largest log2(hypotheses)")->check(CLI::Range(1, 24))->capture_default_str();
-  sweep->add_option("--frames", sa->scenario.frames, "Frames of the scenario")->check(CLI::PositiveNumber)->capture_default_str();
-  sweep->add_option("--noise", sa->scenario.noise_px, "Pixel noise sigma")->check(CLI::NonNegativeNumber)->capture_default_str();
-  sweep->add_option("--outliers", sa->scenario.outlier_fraction, "Outlier fraction")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  sweep->add_option("--frames", sa->scenario.frames, "Frames of the scenario")->check(Positive())->capture_default_str();
+  sweep->add_option("--noise", sa->scenario.noise_px, "Pixel noise sigma")->check(NonNegative())->capture_default_str();
+  sweep->add_option("--outliers", sa->scenario.outlier_fraction, "Outlier fraction")->check(Between(0.0, 1.0))->capture_default_str();
   sweep->add_option("--scenario-seed", sa->scenario.seed, "Seed of the scenario")->capture_default_str();
   sa->pose.Add(sweep);
   AddBackendFlag(sweep, &sa->backend);

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "apps/commands.h"
+#include "apps/options.h"
 #include "eval/trajectory_eval.h"
 #include "io/trajectory_io.h"
 
@@ -26,24 +27,6 @@ struct EvalArgs {
   std::string gt_times, est_times;
   int segments = 0;
 };
-
-// A flag check whose message says what is wrong in words: "--max-dt: must be at least 0 (got -1)".
-CLI::Validator NumberAtLeast(double min) {
-  return CLI::Validator(
-      [min](std::string& text) -> std::string {
-        double v = 0;
-        size_t used = 0;
-        try {
-          v = std::stod(text, &used);
-        } catch (const std::exception&) {
-          used = 0;
-        }
-        if (used == 0 || used != text.size() || !std::isfinite(v)) return fmt::format("'{}' is not a number", text);
-        if (v < min) return fmt::format("must be at least {} (got {})", min, text);
-        return "";
-      },
-      fmt::format(">={}", min));
-}
 
 void RunEval(const EvalArgs& a) {
   const io::Trajectory gt = io::ReadTrajectory(a.gt_path, io::ParseTrajectoryFormat(a.gt_format), a.gt_times);
@@ -67,9 +50,13 @@ void RunEval(const EvalArgs& a) {
     std::fprintf(stderr, "mcslam eval: note: %zu of %zu estimated poses have no ground truth and are not scored\n",
                  est.size() - errors.matched(), est.size());
   if (errors.alignment_result.rotation_ambiguous)
-    std::fprintf(stderr,
-                 "mcslam eval: warning: the camera positions lie on a line; the alignment's rotation about it is "
-                 "not determined, so rotation errors are not meaningful (ATE is)\n");
+    std::fprintf(stderr, "%s",
+                 fmt::format("mcslam eval: warning: the camera positions do not fix the alignment's rotation about the "
+                             "path's main direction (position residual {:.3g} m against a lateral spread of {:.3g} m), "
+                             "so rot_mean/median/max_deg measure the alignment more than the estimate; "
+                             "rot_orient_*_deg do not depend on it (ATE is unaffected)\n",
+                             errors.alignment_result.residual_rmse_m, errors.alignment_result.lateral_spread_m)
+                     .c_str());
   // Checked before anything is printed: a bad --segments is an error, not half an answer.
   std::optional<eval::ScaleDrift> drift;
   if (a.segments > 0) drift = eval::EvaluateScaleDrift(errors, a.segments);
@@ -108,10 +95,10 @@ void RegisterEval(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--csv", args->csv_path, "Write per-frame errors to this CSV file");
   cmd->add_option("--delta", args->delta, fmt::format("RPE frame delta, in matched poses (default {})", args->delta))
-      ->check(NumberAtLeast(1));
+      ->check(FiniteNumber(1, false, HUGE_VAL, ">= 1"));
   cmd->add_option("--max-dt", args->max_dt_s,
                   fmt::format("Largest stamp difference for a match, seconds (default {})", args->max_dt_s))
-      ->check(NumberAtLeast(0));
+      ->check(NonNegative());
   const auto formats = CLI::IsMember({"auto", "tum", "kitti", "euroc"}, CLI::ignore_case);
   cmd->add_option("--gt-format", args->gt_format, "Ground-truth file format")->check(formats)->capture_default_str();
   cmd->add_option("--est-format", args->est_format, "Estimate file format")->check(formats)->capture_default_str();
@@ -120,7 +107,7 @@ void RegisterEval(CLI::App& app) {
   cmd->add_option("--segments", args->segments,
                   "Also align this many consecutive runs of poses on their own (Sim(3)) and print their scale and "
                   "ATE: a monocular estimate's scale drift (0: off)")
-      ->check(NumberAtLeast(0));
+      ->check(NonNegative());
   cmd->callback([args] { RunEval(*args); });
 }
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <set>
 #include <string>
+#include <vector>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -35,7 +36,24 @@ struct RunArgs {
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
   ImageJobOptions image;
+  // Flags that act only in some modes: those of the map building (no effect with --known-map) and those of the
+  // front end and the pixel outputs (no effect on a folder of observations). Given where they do nothing, they
+  // are an error naming them, not silently ignored.
+  std::vector<const CLI::Option*> mapping_flags, image_flags;
 };
+
+// The options added to cmd after its first `from` ones (CLI11 keeps them in the order they were added).
+std::vector<const CLI::Option*> OptionsSince(const CLI::App* cmd, size_t from) {
+  const std::vector<const CLI::Option*> all = cmd->get_options();
+  return {all.begin() + static_cast<std::ptrdiff_t>(std::min(from, all.size())), all.end()};
+}
+
+// The first flag of `flags` given on the command line, refused: it does nothing in this mode.
+void RefuseFlagsWithoutEffect(const std::vector<const CLI::Option*>& flags, const std::string& why) {
+  for (const CLI::Option* f : flags)
+    if (f->count() > 0)
+      throw std::invalid_argument(fmt::format("{}: has no effect {}; leave it out", f->get_name(), why));
+}
 
 
 // The part of report.json that every run on a folder of observations shares.
@@ -150,6 +168,8 @@ void RunFullSlam(const RunArgs& a) {
                          {"trans_mean_m", err->ate_m.mean},
                          {"rot_mean_deg", err->rot_deg.mean},
                          {"rot_median_deg", err->rot_deg.median},
+                         {"rot_orient_mean_deg", err->rot_orient_deg.mean},
+                         {"rotation_ambiguous", err->alignment_result.rotation_ambiguous},
                          {"path_length_m", err->gt_path_length_m},
                          {"mirrored", err->mirrored},
                          {"rpe_rot_mean_deg", err->rpe_rot_deg.mean}};
@@ -173,7 +193,12 @@ void Run(const RunArgs& a) {
     RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, image);
     return;
   }
+  RefuseFlagsWithoutEffect(a.image_flags, fmt::format("on a folder of observations ({}/observations.txt: features "
+                                                      "already tracked, its own camera and ground truth; to run on its "
+                                                      "rendered images instead, add --dataset synthetic)",
+                                                      a.input));
   if (!a.known_map) return RunFullSlam(a);
+  RefuseFlagsWithoutEffect(a.mapping_flags, "with --known-map (the map is given: nothing is initialised or mapped)");
   slam::KnownMapOptions options;
   options.tracker = a.pose.Resolve();
   options.smoother.alpha = a.smooth_alpha;
@@ -255,6 +280,7 @@ void RegisterRun(CLI::App& app) {
       ->required();
   cmd->add_option("--out", args->out, "Output folder")->required();
   cmd->add_flag("--known-map", args->known_map, "Track against the folder's ground-truth map (map_gt.ply) instead of building one");
+  const size_t mapping_from = cmd->get_options().size();
   cmd->add_flag("--gt-scale", args->gt_scale, "Take the first baseline's length from the ground truth (as the paper does)");
   cmd->add_option("--init-method", args->init_method, "Essential matrix: 8point (normalised 8-point + RANSAC + LM) or 5point (OpenCV)")
       ->check(CLI::IsMember({"8point", "5point"}))
@@ -262,7 +288,7 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--init-motion-deg", args->system.init.min_median_motion_deg,
                   "Median feature motion (angle between a feature's rays in two frames) that starts the "
                   "initialisation")
-      ->check(CLI::Range(1e-6, 89.0))
+      ->check(Between(1e-6, 89.0))
       ->capture_default_str();
   cmd->add_option("--pose", args->pose_method, "Pose step: mc (Monte Carlo, the paper) or pnp (RANSAC PnP + LM, baseline)")
       ->check(CLI::IsMember({"mc", "pnp"}))
@@ -276,12 +302,12 @@ void RegisterRun(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--init-parallax-deg", args->system.init.min_median_parallax_deg,
                   "Median parallax the initialisation needs (two views and the refined window)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_option("--settle-parallax-deg", args->system.init.settle_parallax_deg,
                   "After initialisation, the frames since the reference and the map are refined together (bundle "
                   "adjustment) each time their median parallax grows by half, until it reaches this (0: never)")
-      ->check(CLI::Range(0.0, 89.0))
+      ->check(Between(0.0, 89.0))
       ->capture_default_str();
   cmd->add_flag("--no-pose-before-reference{false}", args->system.init.pose_frames_before_reference,
                 "Leave the frames before the initialisation's reference frame (when it moved on while waiting) "
@@ -295,7 +321,7 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--starving-inliers", args->system.mapping.starving_inliers,
                   "Keyframes with fewer pose inliers than this take new points from 2 degrees of parallax whatever "
                   "--min-parallax-deg says, so that the map does not run dry (0: off)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_option("--history-frames", args->system.mapping.history_frames,
                   "Frames whose features the back end keeps (older ones keep only their pose; never less than the "
@@ -303,32 +329,35 @@ void RegisterRun(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--adjust-px", args->system.mapping.adjust_threshold_px,
                   "Residual (median over the window) above which a point that no sample fixes is an outlier")
-      ->check(CLI::PositiveNumber)
+      ->check(Positive())
       ->capture_default_str();
   cmd->add_option("--candidate-px", args->system.mapping.candidate_threshold_px,
                   "Residual above which a point is re-sampled (the paper: the same as --adjust-px)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_flag("!--no-adjust", args->system.mapping.adjust, "Skip the Monte Carlo point adjustment");
   cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
                   "Smallest parallax for a new point (largest angle between its viewing rays)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_option("--new-point-depth-noise", args->system.mapping.max_relative_depth_noise,
                   "New points also need the parallax at which the tracks' measured noise gives at most this "
                   "relative depth error (capped at --max-noise-parallax-deg)")
-      ->check(CLI::PositiveNumber)
+      ->check(Positive())
       ->capture_default_str();
   cmd->add_option("--max-noise-parallax-deg", args->system.mapping.max_noise_parallax_deg,
                   "Cap of the parallax the tracks' noise asks of new points (0: only --min-parallax-deg)")
-      ->check(CLI::Range(0.0, 89.0))
+      ->check(Between(0.0, 89.0))
       ->capture_default_str();
+  args->mapping_flags = OptionsSince(cmd, mapping_from);
   cmd->add_option("--smooth-alpha", args->smooth_alpha, "DESP smoothing weight of the new pose, (0, 1]")
-      ->check(CLI::Range(1e-6, 1.0))
+      ->check(Between(1e-6, 1.0))
       ->capture_default_str();
   args->pose.Add(cmd);
   AddBackendFlag(cmd, &args->backend);
+  const size_t image_from = cmd->get_options().size();
   AddImageJobFlags(cmd, &args->image);
+  args->image_flags = OptionsSince(cmd, image_from);
   cmd->callback([args] { Run(*args); });
 }
 

@@ -455,7 +455,7 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--descriptor-refresh-frames", o->frontend.descriptor_refresh_frames,
                   "Front end: a track is described again once its descriptor is this many frames old, so that a lost "
                   "map point is matched with how it looked when last seen (0: birth descriptors only)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_flag("--no-jolt-recovery{false}", o->frontend.jolt_recovery,
                 "Front end: do not retry the tracks LK lost from where the image's measured global shift puts them");
@@ -500,8 +500,10 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   // --camera: a file, or the numbers inline ("fx fy cx cy ..."); io::OpenDataset tells which, or says neither.
   if (!options.camera_path.empty() && fs::is_directory(options.camera_path, ec))
     throw std::runtime_error(fmt::format("--camera {}: a folder, not a camera file", options.camera_path));
-  if (!options.gt_path.empty() && !fs::is_regular_file(options.gt_path, ec))
+  if (!options.gt_path.empty() && !fs::exists(options.gt_path, ec))
     throw std::runtime_error(fmt::format("--gt {}: the file does not exist", options.gt_path));
+  if (!options.gt_path.empty() && !fs::is_regular_file(options.gt_path, ec))
+    throw std::runtime_error(fmt::format("--gt {}: is not a regular file (a folder, pipe or device)", options.gt_path));
   io::Dataset data = io::OpenDataset(input, dopt);
   for (const std::string& note : data.notes) spdlog::warn("{}", note);
   if (!data.camera)
@@ -592,6 +594,8 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   bool was_lost = false;
   bool skipped_since_processed = false;  // frames were skipped since the last one processed
   int64_t frames_processed = 0, frames_read = 0;
+  int64_t frames_decoded = 0;  // frames the source gave, from its first (before --start included)
+  bool source_ended = false;   // the source ran out (not --end, an interrupt or a failure)
   Progress progress(last >= 0 ? std::optional<int64_t>(last) : std::nullopt);
   const RunClock clock;  // wall and process CPU time of the frames' processing
   const auto t_start = Clock::now();
@@ -602,7 +606,11 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     std::vector<frontend::RemapRequest> requests;
     while (!Interrupted()) {
       const auto t_frame = Clock::now();
-      if (!data.source->Next(&frame)) break;
+      if (!data.source->Next(&frame)) {
+        source_ended = true;
+        break;
+      }
+      frames_decoded = frame.index + 1;
       const double decode_ms = MsSince(t_frame);
       if (frame.index < options.start) continue;
       if (options.end >= 0 && frame.index > options.end) break;
@@ -749,6 +757,17 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   progress.Clear();
   const bool interrupted = Interrupted();
   if (interrupted) spdlog::warn("interrupted: writing the {} frames done so far", rows.size());
+  // A video that ends well before the frame count its header promises was cut off or is damaged: the run is
+  // what it is, but it says so (log and report.json's notes) instead of passing for the whole video. Container
+  // counts are estimates for some codecs: a few frames short (2 %, at least 2) is not reported.
+  std::vector<std::string> notes = data.notes;
+  if (source_ended && data.kind == io::DatasetKind::kVideo && count &&
+      static_cast<double>(frames_decoded) < 0.98 * static_cast<double>(*count) - 2.0) {
+    notes.push_back(fmt::format("{}: the video ended after {} of the {} frames its header promises (cut off or "
+                                "damaged?); the run covers only those",
+                                input, frames_decoded, *count));
+    spdlog::warn("{}", notes.back());
+  }
   if (frames_read == 0 && failure.empty() && !interrupted)
     failure = options.start > 0 ? fmt::format("--start {}: {} ended before that frame (no frame to process)",
                                               options.start, data.source->Description())
@@ -854,7 +873,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   j["camera"] = {{"fx", camera.fx}, {"fy", camera.fy}, {"cx", camera.cx}, {"cy", camera.cy},
                  {"width", camera.width}, {"height", camera.height}, {"distorted", camera.HasDistortion()},
                  {"origin", data.camera_origin}};
-  j["notes"] = data.notes;
+  j["notes"] = notes;
   j["options"] = {{"backend", backend},
                   {"pose", sys_opts.pose_method == slam::PoseMethod::kPnp ? "pnp" : "mc"},
                   {"structure", sys_opts.structure_method == slam::StructureMethod::kBundleAdjustment ? "ba" : "mc"},
@@ -940,12 +959,15 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
                          {"matched", errors->matched()},
                          {"alignment", "sim3"},
                          {"scale", errors->alignment_result.gt_world_from_est_world.scale},
-                         // Positions (nearly) on a line leave the rotation about it free: rot_deg then means little.
+                         // Positions that do not fix the rotation about the path's main direction (eval.h): rot_deg
+                         // then measures the alignment; rot_orient_deg does not depend on it.
                          {"rotation_ambiguous", errors->alignment_result.rotation_ambiguous},
+                         {"lateral_spread_m", errors->alignment_result.lateral_spread_m},
                          {"path_length_m", errors->gt_path_length_m},
                          {"mirrored", errors->mirrored},
                          {"ate_m", StatsJson(errors->ate_m)},
                          {"rot_deg", StatsJson(errors->rot_deg)},
+                         {"rot_orient_deg", StatsJson(errors->rot_orient_deg)},
                          {"rpe_delta", errors->rpe_delta},
                          {"rpe_trans_m", StatsJson(errors->rpe_trans_m)},
                          {"rpe_rot_deg", StatsJson(errors->rpe_rot_deg)}};

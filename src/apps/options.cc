@@ -2,7 +2,10 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
+#include <fstream>
+#include <algorithm>
 #include <csignal>
 #include <stdexcept>
 #include <string>
@@ -24,6 +27,60 @@ CLI::Validator UnsignedInteger() {
       "integer >= 0", "");
 }
 
+CLI::Validator FiniteNumber(double lo, bool lo_open, double hi, const std::string& wanted) {
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        const bool parsed = !text.empty() && end != text.c_str() && *end == '\0';
+        if (!parsed) return "must be a number " + wanted + ", got '" + text + "'";
+        if (!std::isfinite(v) || v < lo || (lo_open && v == lo) || v > hi) return "must be " + wanted + ", got " + text;
+        return "";
+      },
+      wanted, "");
+}
+
+CLI::Validator NonNegative() { return FiniteNumber(0, false, HUGE_VAL, ">= 0"); }
+CLI::Validator Positive() { return FiniteNumber(0, true, HUGE_VAL, "> 0"); }
+CLI::Validator Between(double lo, double hi) {
+  return FiniteNumber(lo, false, hi, fmt::format("in [{}, {}]", lo, hi));
+}
+
+namespace {
+// The first number in a small kernel file ("max" or a missing file: nullopt).
+std::optional<uint64_t> ReadNumberFile(const char* path, const char* key = nullptr) {
+  std::ifstream in(path);
+  std::string token;
+  while (in >> token) {
+    if (key != nullptr && token != key) continue;
+    if (key != nullptr && !(in >> token)) return std::nullopt;
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long v = std::strtoull(token.c_str(), &end, 10);
+    if (end == token.c_str() || errno == ERANGE) return std::nullopt;
+    return static_cast<uint64_t>(v);
+  }
+  return std::nullopt;
+}
+}  // namespace
+
+std::optional<uint64_t> AvailableMemoryBytes() {
+  std::optional<uint64_t> available;
+  if (const auto kb = ReadNumberFile("/proc/meminfo", "MemAvailable:")) available = *kb * 1024;
+  // cgroup v2, then v1 (whose "no limit" is a huge number, which the min leaves alone).
+  std::optional<uint64_t> limit = ReadNumberFile("/sys/fs/cgroup/memory.max");
+  std::optional<uint64_t> used = ReadNumberFile("/sys/fs/cgroup/memory.current");
+  if (!limit) {
+    limit = ReadNumberFile("/sys/fs/cgroup/memory/memory.limit_in_bytes");
+    used = ReadNumberFile("/sys/fs/cgroup/memory/memory.usage_in_bytes");
+  }
+  if (limit) {
+    const uint64_t left = *limit > used.value_or(0) ? *limit - used.value_or(0) : 0;
+    available = available ? std::min(*available, left) : left;
+  }
+  return available;
+}
+
 void PoseFlags::Add(CLI::App* cmd) {
   cmd->add_option("--hypotheses", tracker.hypotheses, "Pose hypotheses per frame (the paper: 2^18)")
       ->check(CLI::Range(1, 1 << 26))
@@ -39,22 +96,22 @@ void PoseFlags::Add(CLI::App* cmd) {
   cmd->add_option("--sigma-rot-deg", tracker.sigma_rot_deg,
                   "Std of the rotation hypotheses per axis, degrees: the least spread (it grows with the measured "
                   "rotation of the last frame, --sigma-rot-motion)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_option("--sigma-rot-motion", tracker.sigma_rot_motion_scale,
                   "The rotation spread is at least this times the last frame's measured rotation (0: the paper's "
                   "fixed spread)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(NonNegative())
       ->capture_default_str();
   cmd->add_option("--sigma-trans-floor", tracker.sigma_trans_floor_m, "Floor of the translation spread, metres")
-      ->check(CLI::PositiveNumber)
+      ->check(Positive())
       ->capture_default_str();
   cmd->add_option("--inlier-px", tracker.inlier_threshold_px, "Inlier threshold on the residual, pixels")
-      ->check(CLI::PositiveNumber)
+      ->check(Positive())
       ->capture_default_str();
   cmd->add_option("--max-distance-px", tracker.max_distance_px,
                   "Cap on one point's contribution to the score, pixels (1e4: the paper's plain sum)")
-      ->check(CLI::Range(1e-6, 1e6))
+      ->check(Between(1e-6, 1e6))
       ->capture_default_str();
 }
 

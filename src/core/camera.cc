@@ -20,6 +20,17 @@ void PinholeCamera::Check() const {
     throw std::invalid_argument(fmt::format("camera: image size must be positive, got {}x{}", width, height));
   for (double v : {dist.k1, dist.k2, dist.p1, dist.p2, dist.k3})
     if (!finite(v)) throw std::invalid_argument("camera: distortion coefficients must be finite");
+  // A focal length that leaves almost no field of view is a unit mistake (millimetres or metres for pixels is
+  // the other way round; a typo of a few digits this way): the features could never show parallax. The
+  // narrowest real lenses (astronomy, 2000 mm on a small sensor) see ~0.3 deg; refuse below a tenth of that.
+  constexpr double kMinFovDeg = 0.03;
+  const double fov_x_deg = 2.0 * std::atan(0.5 * width / fx) * 180.0 / M_PI;
+  const double fov_y_deg = 2.0 * std::atan(0.5 * height / fy) * 180.0 / M_PI;
+  if (fov_x_deg < kMinFovDeg || fov_y_deg < kMinFovDeg)
+    throw std::invalid_argument(fmt::format(
+        "camera: fx = {:g}, fy = {:g} px leave a field of view of {:.3g} x {:.3g} deg on a {}x{} image (at least "
+        "{} deg expected): are the focal lengths in pixels?",
+        fx, fy, fov_x_deg, fov_y_deg, width, height, kMinFovDeg));
 }
 
 Eigen::Matrix3d PinholeCamera::K() const {

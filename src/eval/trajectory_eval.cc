@@ -33,13 +33,26 @@ double Spread(const Eigen::Matrix3Xd& pts, Eigen::Vector3d* centroid) {
   return std::sqrt((pts.colwise() - *centroid).squaredNorm() / static_cast<double>(pts.cols()));
 }
 
-// Points (nearly) on a line: the second singular value of the centred points is tiny next to the first.
-bool NearlyCollinear(const Eigen::Matrix3Xd& pts, const Eigen::Vector3d& centroid) {
+// RMS extents of the centred points along their principal directions, largest first.
+Eigen::Vector3d PrincipalSpreads(const Eigen::Matrix3Xd& pts, const Eigen::Vector3d& centroid) {
   const Eigen::Matrix3d scatter = (pts.colwise() - centroid) * (pts.colwise() - centroid).transpose();
   const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(scatter).singularValues();  // descending
-  // sv are squared lengths: 1e-12 here is a lateral spread of 1e-6 of the length, far below any real
-  // trajectory's wiggle and far above rounding noise.
-  return sv[1] <= 1e-12 * sv[0];
+  return (sv / static_cast<double>(pts.cols())).cwiseMax(0.0).cwiseSqrt();
+}
+
+// Points exactly on a line, up to rounding: a lateral extent of 1e-6 of the length is far below any real
+// trajectory's wiggle and far above rounding noise.
+bool OnALine(const Eigen::Vector3d& spreads) { return spreads[1] <= 1e-6 * spreads[0]; }
+
+// The rotation R that best maps the estimated orientations onto the true ones, R R_est ~ R_gt (chordal L2
+// mean of R_gt R_est^T, projected onto SO(3)).
+Eigen::Matrix3d OrientationAlignment(const std::vector<Eigen::Quaterniond>& gt, const std::vector<Eigen::Quaterniond>& est) {
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < gt.size(); ++i) sum += gt[i].toRotationMatrix() * est[i].toRotationMatrix().transpose();
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  return svd.matrixU() * d * svd.matrixV().transpose();
 }
 
 std::string Lower(std::string s) {
@@ -177,7 +190,15 @@ AlignmentResult AlignPositions(const std::vector<Eigen::Vector3d>& est_positions
   result.gt_world_from_est_world.scale = scale;
   result.gt_world_from_est_world.rotation = alignment == Alignment::kSim3 ? Eigen::Matrix3d(sR / scale) : sR;
   result.gt_world_from_est_world.translation = T.topRightCorner<3, 1>();
-  result.rotation_ambiguous = NearlyCollinear(est, est_centroid) || NearlyCollinear(gt, gt_centroid);
+  const Eigen::Vector3d est_spreads = PrincipalSpreads(est, est_centroid), gt_spreads = PrincipalSpreads(gt, gt_centroid);
+  result.lateral_spread_m = std::min(gt_spreads[1], scale * est_spreads[1]);
+  const Eigen::Matrix3Xd residual = gt - ((sR * est).colwise() + T.topRightCorner<3, 1>().eval());
+  result.residual_rmse_m = std::sqrt(residual.squaredNorm() / static_cast<double>(n));
+  // A quarter: the lateral shape is then at most 4x its error, and the alignment's turn about the main
+  // direction is uncertain by up to atan(1/4) = 14 degrees, more than the rotation errors it would be used for.
+  constexpr double kMaxResidualOverLateral = 0.25;
+  result.rotation_ambiguous = OnALine(est_spreads) || OnALine(gt_spreads) ||
+                              result.residual_rmse_m >= kMaxResidualOverLateral * result.lateral_spread_m;
   return result;
 }
 
@@ -267,6 +288,7 @@ TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajecto
 
   std::vector<Pose> aligned;  // est world_from_cam moved into the ground-truth world
   std::vector<double> trans_errors, rot_errors;
+  std::vector<Eigen::Quaterniond> gt_q, est_q;
   for (const MatchedPair& p : pairs) {
     const Pose& g = gt.world_from_cam[p.gt_index];
     const Pose a = gt_from_est.Apply(est.world_from_cam[p.est_index]);
@@ -280,11 +302,17 @@ TrajectoryErrors EvaluateTrajectory(const io::Trajectory& gt, const io::Trajecto
     f.rot_err_deg = AngularDistanceDeg(g.q, a.q);
     trans_errors.push_back(f.trans_err_m);
     rot_errors.push_back(f.rot_err_deg);
+    gt_q.push_back(g.q.normalized());
+    est_q.push_back(est.world_from_cam[p.est_index].q.normalized());
     out.frames.push_back(f);
     aligned.push_back(a);
   }
   out.ate_m = ComputeStats(trans_errors);
   out.rot_deg = ComputeStats(rot_errors);
+  const Eigen::Quaterniond orient(OrientationAlignment(gt_q, est_q));
+  std::vector<double> rot_orient;
+  for (size_t i = 0; i < gt_q.size(); ++i) rot_orient.push_back(AngularDistanceDeg(gt_q[i], orient * est_q[i]));
+  out.rot_orient_deg = ComputeStats(rot_orient);
   for (size_t k = 1; k < gt_positions.size(); ++k) out.gt_path_length_m += (gt_positions[k] - gt_positions[k - 1]).norm();
   out.mirrored = out.rot_deg.median > 90.0 || LinearFitIsReflection(est_positions, gt_positions);
 
@@ -369,10 +397,11 @@ void WriteFrameErrorsCsv(const std::string& path, const TrajectoryErrors& errors
 std::string FormatSummary(const TrajectoryErrors& e) {
   return fmt::format(
       "matched={} align={} scale={:.6g} ate_rmse={:.6g} ate_mean={:.6g} ate_median={:.6g} ate_max={:.6g} "
-      "rot_mean_deg={:.6g} rot_median_deg={:.6g} rot_max_deg={:.6g} rpe_delta={} rpe_trans_rmse={:.6g} "
-      "rpe_trans_mean={:.6g} rpe_rot_mean_deg={:.6g}",
+      "rot_mean_deg={:.6g} rot_median_deg={:.6g} rot_max_deg={:.6g} rot_orient_mean_deg={:.6g} "
+      "rot_orient_median_deg={:.6g} rpe_delta={} rpe_trans_rmse={:.6g} rpe_trans_mean={:.6g} rpe_rot_mean_deg={:.6g}",
       e.matched(), ToString(e.alignment), e.alignment_result.gt_world_from_est_world.scale, e.ate_m.rmse, e.ate_m.mean,
-      e.ate_m.median, e.ate_m.max, e.rot_deg.mean, e.rot_deg.median, e.rot_deg.max, e.rpe_delta, e.rpe_trans_m.rmse,
+      e.ate_m.median, e.ate_m.max, e.rot_deg.mean, e.rot_deg.median, e.rot_deg.max, e.rot_orient_deg.mean,
+      e.rot_orient_deg.median, e.rpe_delta, e.rpe_trans_m.rmse,
       e.rpe_trans_m.mean, e.rpe_rot_deg.mean);
 }
 

@@ -31,6 +31,7 @@ CameraKeys KeysWithPrefix(const char* style, const std::string& intrinsics, cons
 class YamlFile {
  public:
   explicit YamlFile(const std::string& path) : path_(path) {
+    detail::RequireRegularFileIfPresent(path);
     std::ifstream in(path);
     if (!in) detail::Fail(path, "cannot open file for reading");
     std::stringstream ss;

@@ -115,6 +115,7 @@ bool LooksLikeKittiCalib(const std::string& path) {
 PinholeCamera ReadCameraFile(const std::string& path, ImageSource& source, const std::string& dataset_path) {
   const std::string ext = Lower(fs::path(path).extension().string());
   if (ext == ".yaml" || ext == ".yml") return ReadCameraYaml(path);
+  detail::RequireRegularFileIfPresent(path);
   if (!IsFile(path)) {
     const std::optional<std::vector<double>> v = InlineCameraNumbers(path);
     if (!v)

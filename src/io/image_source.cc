@@ -55,6 +55,12 @@ bool NaturalLess(const std::string& a, const std::string& b) {
 cv::Mat ReadImage(const std::string& path, std::string* error) {
   cv::Mat image;
   try {
+    detail::RequireRegularFileIfPresent(path);
+  } catch (const std::runtime_error& e) {
+    *error = e.what();
+    return {};
+  }
+  try {
     image = cv::imread(path, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
     *error = fmt::format("{}: cannot decode image ({})", path, e.what());
@@ -200,6 +206,10 @@ std::unique_ptr<VideoSource> VideoSource::OpenFile(const std::string& path, doub
   std::error_code ec;
   if (!fs::exists(path, ec)) throw std::runtime_error(fmt::format("{}: video file does not exist", path));
   if (fs::is_directory(path, ec)) throw std::runtime_error(fmt::format("{}: is a folder, not a video file", path));
+  if (!fs::is_regular_file(path, ec))
+    throw std::runtime_error(fmt::format(
+        "{}: is not a regular file (a pipe, device or socket): give a video file, an image folder or a webcam index",
+        path));
   if (!(fps_override >= 0) || !std::isfinite(fps_override))
     throw std::invalid_argument(fmt::format("{}: fps override must be >= 0 (got {})", path, fps_override));
   std::unique_ptr<VideoSource> src(new VideoSource());

@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <stdexcept>
 #include <string>
@@ -23,10 +24,24 @@ namespace mcslam::io::detail {
   throw std::runtime_error(fmt::format("{}: {}", path, what));
 }
 
+// Refuses what is not a plain file before anything opens it: a folder ("read error after line 0" otherwise), and
+// a pipe, device or socket, whose open or read would block forever (a FIFO with no writer) or never end
+// (/dev/zero). Symbolic links are followed. A missing file is left to the caller's own message.
+inline void RequireRegularFileIfPresent(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || st.type() == fs::file_type::not_found || st.type() == fs::file_type::regular) return;
+  if (st.type() == fs::file_type::directory) Fail(path, "is a folder, not a file");
+  Fail(path, "is not a regular file (a pipe, device or socket); give a file");
+}
+
 // Reads a text file one line at a time, counting lines from 1 and dropping a trailing '\r' (CRLF files).
 class LineReader {
  public:
-  explicit LineReader(const std::string& path) : path_(path), in_(path) {
+  explicit LineReader(const std::string& path) : path_(path) {
+    RequireRegularFileIfPresent(path);
+    in_.open(path);
     if (!in_) detail::Fail(path, "cannot open file for reading");
   }
   bool Next(std::string& line) {

@@ -1,5 +1,6 @@
 // `mcslam eval`: runs the built binary on trajectories made here and checks its one-line summary and refusals.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <cmath>
 #include <string>
@@ -97,7 +98,7 @@ TEST(CliEval, SegmentsShowAScaleDrift) {
   EXPECT_NEAR(Field(r.output, "scale_max_over_min"), 1.25, 1e-5) << r.output;
   EXPECT_NE(r.output.find("segment=1 poses=50-99 first_stamp="), std::string::npos) << r.output;
   // The segments' figures have keys of their own: the summary's scale is still the first and only scale=.
-  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '='), 14 + 2 + 2 * 7) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '='), 16 + 2 + 2 * 7) << r.output;
   EXPECT_EQ(r.output.find(" scale=", r.output.find('\n')), std::string::npos) << r.output;
   EXPECT_GT(Field(r.output, "ate_rmse"), 0.01) << r.output;  // the whole run's, hiding the drift
   // Too many segments for 100 poses: an error, and nothing printed as if it had worked.
@@ -132,6 +133,22 @@ TEST(CliEval, MissingFileNamesIt) {
   EXPECT_NE(r.output.find(missing), std::string::npos) << r.output;
 }
 
+// What is not a plain file is refused naming it, before anything reads it: a folder (it used to read as "read
+// error after line 0") and a pipe with no writer (opening it blocked forever; `timeout` turns a hang into a
+// failure here instead of a ctest timeout).
+TEST(CliEval, FoldersAndPipesAreRefusedNamingThem) {
+  TempDir dir;
+  io::WriteTum(dir / "gt.txt", MakeGroundTruth());
+  auto r = RunMcslam("eval " + (dir / "gt.txt") + " " + dir.path().string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(dir.path().string() + ": is a folder, not a file"), std::string::npos) << r.output;
+  const std::string fifo = dir / "pipe.txt";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  r = testing::RunShell("timeout 30 " + std::string(MCSLAM_BIN) + " eval " + fifo + " " + (dir / "gt.txt") + " 2>&1");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(fifo + ": is not a regular file"), std::string::npos) << r.output;
+}
+
 TEST(CliEval, BadFlagsNameTheFlag) {
   TempDir dir;
   io::WriteTum(dir / "gt.txt", MakeGroundTruth());
@@ -146,6 +163,9 @@ TEST(CliEval, BadFlagsNameTheFlag) {
            {"--max-dt -1", "--max-dt"},
            {"--gt-format xyz", "--gt-format"},
            {"--segments -1", "--segments"},
+           {"--max-dt inf", "--max-dt: must be >= 0, got inf"},
+           {"--max-dt 1e400", "--max-dt: must be >= 0, got 1e400"},
+           {"--max-dt abc", "--max-dt: must be a number >= 0, got 'abc'"},
        }) {
     const auto r = RunMcslam("eval" + files + " " + flags);
     EXPECT_NE(r.exit_code, 0) << flags;

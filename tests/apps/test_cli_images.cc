@@ -2,6 +2,7 @@
 // back end. The small sequences are rendered here: a camera moving inside a textured room corner (floor, back
 // wall, left wall), ray-cast per pixel, so the ground truth is exact.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cmath>
@@ -226,14 +227,18 @@ TEST(CliImages, CorruptFrameIsSkippedAndCounted) {
   EXPECT_NE(ReadText(out + "/frames.csv").find(",skipped,"), std::string::npos);
 }
 
+// The sequence's frames as a grey video at 30 fps.
+void WriteVideo(const std::string& path, int fourcc, const RenderedSequence& seq) {
+  cv::VideoWriter writer(path, fourcc, 30.0, cv::Size(kCamera.width, kCamera.height), false);
+  ASSERT_TRUE(writer.isOpened()) << path;
+  for (const cv::Mat& f : seq.frames) writer.write(f);
+  writer.release();
+}
+
 TEST(CliImages, VideoInputRunsAndOverlayNeedsNoGroundTruth) {
   TempDir dir;
   const RenderedSequence& seq = Sequence();
-  cv::VideoWriter writer(dir / "room.mp4", cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0,
-                         cv::Size(kCamera.width, kCamera.height), false);
-  ASSERT_TRUE(writer.isOpened());
-  for (const cv::Mat& f : seq.frames) writer.write(f);
-  writer.release();
+  WriteVideo(dir / "room.mp4", cv::VideoWriter::fourcc('m', 'p', '4', 'v'), seq);
   io::WriteCameraYaml(dir / "camera.yaml", kCamera);
   io::WriteTum(dir / "gt.txt", seq.groundtruth);
   const std::string out = dir / "out";
@@ -247,6 +252,36 @@ TEST(CliImages, VideoInputRunsAndOverlayNeedsNoGroundTruth) {
   EXPECT_GE(j["tracked"].get<int>(), 38) << r.output;
   EXPECT_LT(j["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.03);
   EXPECT_TRUE(fs::exists(dir / "o.mp4"));
+}
+
+// A video cut off mid-stream (a copy that stopped, a damaged file) still runs on what it has, but says so in the
+// log and in report.json's notes (issue #20: it exited 0 after 54 of the 120 frames its header promised, with no
+// word). An AVI keeps its frame count in its header, so cutting the file keeps the promise and loses the frames.
+TEST(CliImages, VideoCutOffMidStreamSaysSo) {
+  TempDir dir;
+  const RenderedSequence& seq = Sequence();
+  WriteVideo(dir / "room.avi", cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), seq);
+  io::WriteCameraYaml(dir / "camera.yaml", kCamera);
+  const auto run = [&](const std::string& video, const std::string& out) {
+    const auto r = RunMcslam(fmt::format("run {} --camera {} --out {} --hypotheses 4096", video, dir / "camera.yaml",
+                                         dir / out));
+    return std::make_pair(r, ReadJson(dir / (out + "/report.json")));
+  };
+  // The whole video: no such note.
+  auto [whole, whole_report] = run(dir / "room.avi", "whole");
+  EXPECT_EQ(whole_report["frames_read"].get<int>(), static_cast<int>(seq.frames.size())) << whole.output;
+  EXPECT_EQ(whole.output.find("header promises"), std::string::npos) << whole.output;
+  // The first 45 % of its bytes.
+  const std::string bytes = ReadText(dir / "room.avi");
+  testing::WriteText(dir / "cut.avi", bytes.substr(0, bytes.size() * 45 / 100));
+  auto [cut, cut_report] = run(dir / "cut.avi", "cut");
+  const int read = cut_report["frames_read"].get<int>();
+  EXPECT_LT(read, static_cast<int>(seq.frames.size()) * 6 / 10) << cut.output;
+  const std::string note = fmt::format("the video ended after {} of the {} frames its header promises", read,
+                                       seq.frames.size());
+  EXPECT_NE(cut.output.find(note), std::string::npos) << cut.output;
+  ASSERT_EQ(cut_report["notes"].size(), 1u) << cut_report["notes"];
+  EXPECT_NE(cut_report["notes"][0].get<std::string>().find(note), std::string::npos) << cut_report["notes"];
 }
 
 TEST(CliImages, SequenceThatNeverMovesFailsButKeepsItsOutputs) {
@@ -318,6 +353,45 @@ TEST(CliImages, CameraGivenInlineOrAsAKittiCalib) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("camera '400 400 239.5': no such file, nor"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir / "bad/report.json"));
+}
+
+// Every file input refuses a pipe or a device before opening it, naming it (issue #20: a FIFO given as the video
+// blocked forever inside the video reader; /dev/zero as a camera file never ends). `timeout` turns a hang into a
+// failure of this test rather than a ctest timeout.
+TEST(CliImages, PipesAndDevicesAreRefusedNotWaitedOn) {
+  TempDir dir;
+  const std::string folder = WriteImageFolder(dir, "room", /*with_camera=*/false);
+  io::WriteCameraYaml(dir / "camera.yaml", kCamera);
+  const std::string fifo = dir / "pipe.mp4";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const std::string bin = std::string("timeout 60 ") + MCSLAM_BIN;
+  for (const auto& [args, named] : std::vector<std::pair<std::string, std::string>>{
+           {fmt::format("run {} --camera {}", fifo, dir / "camera.yaml"), fifo},
+           {fmt::format("run {} --camera {}", folder, fifo), fifo},
+           {fmt::format("run {} --camera /dev/zero", folder), "/dev/zero"},
+           {fmt::format("run {} --camera {} --gt {}", folder, dir / "camera.yaml", fifo), "--gt " + fifo},
+       }) {
+    const auto r = testing::RunShell(fmt::format("{} {} --out {} 2>&1", bin, args, dir / "o"));
+    EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find(named + ": is not a regular file"), std::string::npos) << args << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir / "o/report.json")) << args;
+  }
+}
+
+// A focal length that leaves no field of view (a unit mistake) is refused naming it, not run to "the sequence
+// never moved enough"; inf is refused as not finite; both in words, without CLI11's 309-digit largest double.
+TEST(CliImages, ImplausibleCameraNumbersAreRefusedInWords) {
+  TempDir dir;
+  const std::string folder = WriteImageFolder(dir, "room", /*with_camera=*/false);
+  auto r = RunMcslam(fmt::format("run {} --camera \"1e300 500 239.5 179.5\" --out {}", folder, dir / "a"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("fx = 1e+300"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("field of view"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "a/report.json"));
+  r = RunMcslam(fmt::format("run {} --camera \"500 500 239.5 179.5\" --sigma-rot-deg inf --out {}", folder, dir / "b"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--sigma-rot-deg: must be >= 0, got inf"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("17976931348623157"), std::string::npos) << r.output;
 }
 
 TEST(CliImages, VideoThatCannotBeOpenedIsAClearError) {

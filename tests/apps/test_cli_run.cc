@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -110,6 +112,34 @@ TEST(CliRun, BadInputIsAClearError) {
     EXPECT_NE(r.exit_code, 0) << seed;
     EXPECT_NE(r.output.find("--seed"), std::string::npos) << r.output;
   }
+}
+
+// A flag that does nothing in the mode the input selects is an error naming it (issue #20: on a folder of
+// observations --overlay, --plot, --camera, --start/--end, --gt (even a missing file) and --format were
+// ignored without a word; with --known-map so were the map-building flags). Nothing is run or written.
+TEST(CliRun, FlagsWithoutEffectInTheModeAreRefusedNamingThem) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 5 --out " + dir / "s").exit_code, 0);
+  for (const auto& [flags, named, why] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"--overlay " + dir / "o.mp4", "--overlay", "on a folder of observations"},
+           {"--plot " + dir / "p.png", "--plot", "on a folder of observations"},
+           {"--camera \"500 500 160 120\"", "--camera", "on a folder of observations"},
+           {"--start 2", "--start", "on a folder of observations"},
+           {"--end 3", "--end", "on a folder of observations"},
+           {"--gt " + dir / "missing.txt", "--gt", "on a folder of observations"},
+           {"--format kitti", "--format", "on a folder of observations"},
+           {"--max-features 100", "--max-features", "on a folder of observations"},
+           {"--known-map --end 3", "--end", "on a folder of observations"},
+           {"--known-map --window 5", "--window", "with --known-map"},
+           {"--known-map --init-method 5point", "--init-method", "with --known-map"},
+       }) {
+    const auto r = RunMcslam("run " + dir / "s " + flags + " --out " + dir / "r");
+    EXPECT_EQ(r.exit_code, 1) << flags << "\n" << r.output;
+    EXPECT_NE(r.output.find(named + ": has no effect " + why), std::string::npos) << flags << "\n" << r.output;
+    EXPECT_FALSE(std::filesystem::exists(dir / "r")) << flags;
+  }
+  // The flags of each mode still work in it.
+  EXPECT_EQ(RunMcslam("run " + dir / "s --known-map --smooth-alpha 0.3 --hypotheses 1024 --out " + dir / "k").exit_code, 0);
 }
 
 // SIGTERM (what `timeout`, `kill` and job schedulers send) stops a run like Ctrl-C: what was done is written,

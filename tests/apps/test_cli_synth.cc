@@ -185,6 +185,18 @@ TEST(CliSynth, ScenarioOptionsThatDoNotFitAreRefusedNamingTheFlag) {
   EXPECT_EQ(RunMcslam("synth --scenario forward --frames 300 --speed 0.5 --out " + tmp / "ok").exit_code, 0);
 }
 
+// A length no machine's memory holds (2e9 frames of ~28 kB each) is refused before any work, naming the flag and
+// the memory it would need, instead of growing until the kernel kills the process (issue #20: exit 137 after
+// 24 GB). The refusal must come from the estimate, not from running: the output folder is never created.
+TEST(CliSynth, ALengthTheMemoryCannotHoldIsRefusedBeforeAnyWork) {
+  TempDir tmp;
+  const auto r = RunMcslam("synth --scenario paper --frames 2000000000 --out " + tmp / "huge");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--frames 2000000000"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("GiB of memory"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(tmp / "huge"));
+}
+
 TEST(CliSynth, UnwritableOutputFolderFailsNamingIt) {
   TempDir tmp;
   testing::WriteText(tmp / "file", "not a folder");
