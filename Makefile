@@ -6,7 +6,7 @@ JOBS ?= $(shell nproc)
 DEMO_OUT ?= out/demo
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test test-portable demo bench clean
+.PHONY: all deps configure build test test-portable test-sanitize fuzz demo bench clean
 
 all: build
 
@@ -32,8 +32,23 @@ test-portable: deps
 	cmake --build $(PORTABLE_BUILD) -j $(JOBS)
 	ctest --test-dir $(PORTABLE_BUILD) --output-on-failure -j $(JOBS) --timeout 900
 
+# The same tests built with AddressSanitizer + UndefinedBehaviorSanitizer (no CUDA, no benchmarks): a memory error,
+# a leak or undefined behaviour anywhere a test reaches fails that test.
+SANITIZE_BUILD ?= build-sanitize
+SANITIZE_ENV = ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1 \
+               UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+test-sanitize: deps
+	cmake -S . -B $(SANITIZE_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DMCSLAM_SANITIZE=ON -DMCSLAM_CUDA=OFF -DMCSLAM_BUILD_BENCH=OFF $(CMAKE_FLAGS)
+	cmake --build $(SANITIZE_BUILD) -j $(JOBS)
+	$(SANITIZE_ENV) ctest --test-dir $(SANITIZE_BUILD) --output-on-failure -j $(JOBS) --timeout 1800
+
+# Every reader of outside files fuzzed (libFuzzer, clang, ASan + UBSan) for FUZZ_SECONDS each from fuzz/corpus/.
+FUZZ_SECONDS ?= 30
+fuzz: deps
+	bash scripts/fuzz.sh $(FUZZ_SECONDS) build-fuzz
+
 demo: build
 	bash scripts/demo.sh $(BUILD)/mcslam $(DEMO_OUT)
 
 clean:
-	rm -rf $(BUILD) $(PORTABLE_BUILD) out
+	rm -rf $(BUILD) $(PORTABLE_BUILD) $(SANITIZE_BUILD) build-fuzz out

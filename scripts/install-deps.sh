@@ -9,7 +9,9 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-matplotlib python3-numpy
+  clang libclang-rt-14-dev
 )
+# clang and its runtime libraries (libFuzzer, the sanitizers) build the fuzz targets (scripts/fuzz.sh).
 
 missing=()
 for p in "${PACKAGES[@]}"; do

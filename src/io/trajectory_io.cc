@@ -200,7 +200,11 @@ Trajectory ReadEuroc(const std::string& path) {
     if (detail::TryParseInt(tok[0], &ns)) {
       stamp_s = NanosecondsToSeconds(ns);
     } else {
-      stamp_s = detail::ParseFinite(tok[0], r, "timestamp [ns]") * 1e-9;  // some tools write ns as a float
+      // Some tools write ns as a float; EuRoC's stamps are int64 ns, and one beyond them cannot be written back.
+      const double ns_float = detail::ParseFinite(tok[0], r, "timestamp [ns]");
+      if (!(std::abs(ns_float) < 9.2e18))
+        r.Fail(fmt::format("timestamp {} ns does not fit in 64 bits (EuRoC stamps are int64 nanoseconds)", tok[0]));
+      stamp_s = ns_float * 1e-9;
     }
     static constexpr const char* kNames[8] = {"timestamp", "px", "py", "pz", "qw", "qx", "qy", "qz"};
     double v[8];

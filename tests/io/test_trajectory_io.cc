@@ -139,6 +139,15 @@ TEST(TrajectoryIo, EurocGroundTruthWith17ColumnsReadsThePose) {
   EXPECT_LT(AngularDistanceRad(t.world_from_cam[0].q, q_expected), 1e-15);  // same normalisation, a few ulp
 }
 
+// Found by fuzz_trajectory (fuzz/corpus/trajectory/regress_euroc_ns_beyond_int64): a stamp of 1.4e19 ns (one
+// digit too many) was read as a float and accepted, and the trajectory could then not be written back as EuRoC.
+// It is refused naming the file, the line and the stamp.
+TEST(TrajectoryIo, EurocStampBeyond64BitsIsRefused) {
+  TempDir dir;
+  WriteText(dir / "gt.csv", "#timestamp,x,y,z,qw,qx,qy,qz\n14036365797458555392,4.688,-1.786,0.783,1,0,0,0\n");
+  ExpectThrowsWith([&] { ReadEuroc(dir / "gt.csv"); }, "gt.csv:2: timestamp 14036365797458555392 ns does not fit");
+}
+
 TEST(TrajectoryIo, EurocHeaderWithoutHashIsSkipped) {
   TempDir dir;
   WriteText(dir / "est.csv", "timestamp,x,y,z,qw,qx,qy,qz\n1500000000,1,2,3,1,0,0,0\n2500000000,4,5,6,1,0,0,0\n");
