@@ -28,6 +28,16 @@ struct Scene {
   }
 };
 
+// Up to 100 iterations, the first two cameras held: they fix the gauge, scale included.
+BundleAdjustSummary AdjustWithTheFirstTwoFixed(std::vector<Pose>& cams, std::vector<Eigen::Vector3d>& pts,
+                                               const std::vector<BundleObservation>& obs) {
+  std::vector<bool> fixed(cams.size(), false);
+  fixed[0] = fixed[1] = true;
+  BundleAdjustOptions o;
+  o.max_iterations = 100;
+  return BundleAdjust(cams, pts, obs, fixed, o);
+}
+
 TEST(BundleAdjust, RecoversPerturbedPosesAndPoints) {
   const Scene truth;
   std::vector<Pose> cams = truth.cams;
@@ -37,11 +47,7 @@ TEST(BundleAdjust, RecoversPerturbedPosesAndPoints) {
     cams[c] = Pose(cams[c].q * QuaternionFromRotationVector(Eigen::Vector3d(0.005 * rng.Normal(), 0.005 * rng.Normal(), 0.005 * rng.Normal())),
                    cams[c].t + Eigen::Vector3d(0.01 * rng.Normal(), 0.01 * rng.Normal(), 0.01 * rng.Normal()));
   for (auto& p : pts) p += Eigen::Vector3d(0.02 * rng.Normal(), 0.02 * rng.Normal(), 0.02 * rng.Normal());
-  std::vector<bool> fixed(cams.size(), false);
-  fixed[0] = fixed[1] = true;  // two cameras fix the gauge, scale included
-  BundleAdjustOptions o;
-  o.max_iterations = 100;
-  const BundleAdjustSummary s = BundleAdjust(cams, pts, truth.obs, fixed, o);
+  const BundleAdjustSummary s = AdjustWithTheFirstTwoFixed(cams, pts, truth.obs);
   EXPECT_GT(s.initial_rms_px, 1.0);
   EXPECT_LT(s.final_rms_px, 1e-4);  // exact data: converges to zero residual (float-free double solve)
   for (size_t c = 0; c < cams.size(); ++c) {
@@ -61,11 +67,7 @@ TEST(BundleAdjust, APointBehindACameraDoesNotStopTheAdjustment) {
   for (size_t c = 2; c < cams.size(); ++c)
     cams[c] = Pose(cams[c].q, cams[c].t + Eigen::Vector3d(0.01 * rng.Normal(), 0.01 * rng.Normal(), 0.01 * rng.Normal()));
   pts[7] = Eigen::Vector3d(0.1, 0.0, -1.0);  // behind every camera
-  std::vector<bool> fixed(cams.size(), false);
-  fixed[0] = fixed[1] = true;
-  BundleAdjustOptions o;
-  o.max_iterations = 100;
-  const BundleAdjustSummary s = BundleAdjust(cams, pts, truth.obs, fixed, o);
+  const BundleAdjustSummary s = AdjustWithTheFirstTwoFixed(cams, pts, truth.obs);
   EXPECT_EQ(s.left_out_behind, 8);  // point 7 in each of the 8 cameras
   EXPECT_TRUE(s.converged) << s.report;
   for (size_t c = 0; c < cams.size(); ++c) {
