@@ -123,13 +123,14 @@ void RunFullSlam(const RunArgs& a) {
   }
   WriteSlamFramesCsv((out / "frames.csv").string(), res.reports, err ? &*err : nullptr);
 
-  int tracked = 0, lost = 0, waiting = 0, keyframes = 0;
+  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0;
   std::vector<double> ms;
   for (const auto& r : res.reports) {
     tracked += r.status == slam::FrameStatus::kTracked;
     lost += r.status == slam::FrameStatus::kLost;
     waiting += r.status == slam::FrameStatus::kWaitingForInit;
     keyframes += r.keyframe;
+    rotation_only += r.rotation_only;
     if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
   }
   const double fps = res.reports.size() / std::max(res.times.wall_s, 1e-9);
@@ -144,6 +145,7 @@ void RunFullSlam(const RunArgs& a) {
   j["lost"] = lost;
   j["not_initialised"] = waiting;
   j["keyframes"] = keyframes;
+  j["rotation_only"] = rotation_only;  // of the tracked: posed by their turn about the last centre
   j["map_points"] = res.map.points.size();
   j["initialised"] = res.initialised;
   j["initialisation"] = nullptr;

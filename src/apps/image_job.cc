@@ -855,7 +855,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
     if (row.before_init) be_init.Add(row.backend_ms);
     features_sum += row.features;
   }
+  int64_t rotation_only = 0;  // of the tracked: posed by their turn about the last centre (the map out of view)
   for (const slam::FrameReport& r : reports) {
+    rotation_only += r.rotation_only;
     sum.tracked += r.status == slam::FrameStatus::kTracked;
     sum.lost += r.status == slam::FrameStatus::kLost;
     sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
@@ -898,6 +900,7 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   j["lost"] = sum.lost;
   j["not_initialised"] = sum.not_initialised;
   j["keyframes"] = sum.keyframes;
+  j["rotation_only"] = rotation_only;
   j["map_points"] = sum.map_points;
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);

@@ -220,8 +220,9 @@ Scene RoomScene() {
 }
 
 Path RotationPath(uint64_t seed, double speed) {
-  const auto [s1, e1] = kRotationPureSegmentsS[0];
-  const auto [s2, e2] = kRotationPureSegmentsS[1];
+  // Plain copies, not structured bindings: a lambda below captures them (clang 14 cannot capture bindings).
+  const double s1 = kRotationPureSegmentsS[0].first, e1 = kRotationPureSegmentsS[0].second;
+  const double s2 = kRotationPureSegmentsS[1].first, e2 = kRotationPureSegmentsS[1].second;
   // Translation progress: 2 % of the paper's speed while the opening pan lasts, none in the pure-rotation
   // segments, ramps of 0.2-0.3 s between (no jump in velocity).
   const TimeWarp warp({{0.0, 0.02},

@@ -39,6 +39,7 @@ struct FrameRecord {
   std::vector<FeatureUndistorted> features;  // sorted by id
   bool has_pose = false;
   Pose cam_from_world;
+  int pose_inliers = 0;  // the map points that agreed with the pose step's pose (0: posed otherwise)
 
   const FeatureUndistorted* Find(int64_t id) const {
     auto it = std::lower_bound(features.begin(), features.end(), id,

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "compute/point_kernel.h"
@@ -144,6 +145,17 @@ struct SystemOptions {
   // Relocalisation (System::Relocalise): a pose is accepted when at least this many of the matches agree
   // with it (RANSAC PnP, the tracker's inlier threshold).
   int relocalise_min_inliers = 15;
+  // When the map leaves the view while the camera only turns (a pan away from what was mapped), no point can be
+  // triangulated and the pose step runs out of points. The frame is then posed by its rotation about the last
+  // tracked camera centre, from the bearings of the tracks (Wahba's problem; the rotation-only model of a
+  // panorama), while at least rotation_only_min_tracks of them, and rotation_only_min_ratio of those shared,
+  // agree within the pose step's inlier threshold: a camera that also moves makes the tracks disagree with any
+  // rotation (their parallax grows against the bearings recorded when each track was first seen), and the frame
+  // is lost as before. No keyframe, no point is made from such frames; the map's pose step takes over as soon as
+  // it has points again (lost ones found again by remapping near where the turn projects them).
+  bool rotation_only = true;
+  int rotation_only_min_tracks = 20;
+  double rotation_only_min_ratio = 0.7;
   void Check() const;
 };
 
@@ -179,7 +191,8 @@ struct FrameReport {
   double reproj_mean_px = 0;    // mean residual of the inlier observations of map points in this frame
   double reproj_median_px = 0;  // median residual of all observations of map points in this frame
   double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
-  std::string note;             // why lost / waiting
+  std::string note;             // why lost / waiting; how posed when not by the pose step
+  bool rotation_only = false;   // tracked by its rotation about the last centre (SystemOptions::rotation_only)
   // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
   // ambiguity), as opposed to no initialisation being possible yet.
   bool init_rejected = false;
@@ -253,6 +266,9 @@ class System {
   geometry::PnpOptions TrackerPnpOptions(int min_inliers) const;
   std::optional<Pose> PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const;
   FrameReport TrackFrame(int slot, const std::optional<Pose>& pose_hint);
+  // SystemOptions::rotation_only: poses `slot` by its rotation about the last tracked centre when the tracks
+  // agree on one; true when it did (r then says so).
+  bool TrackRotationOnly(int slot, FrameReport* r);
   int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
@@ -294,6 +310,13 @@ class System {
   static constexpr size_t kResidualHistory = 15;
   std::deque<double> recent_residual_px_;
   double noise_parallax_deg_ = 0;
+  // Rotation-only tracking (SystemOptions::rotation_only): the centre all its frames share (the last frame the
+  // pose step tracked), and each track's bearing in the world as first seen from there.
+  static constexpr int kPanoramaCentreLookback = 10;  // frames searched back for a well-posed centre
+  bool panorama_active_ = false;
+  Eigen::Vector3d panorama_centre_ = Eigen::Vector3d::Zero();
+  double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
+  std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
 };
 
 }  // namespace mcslam::slam
