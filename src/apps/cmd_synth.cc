@@ -1,14 +1,14 @@
 // `mcslam synth --scenario NAME --out DIR`: write a synthetic sequence of the scenario zoo (sim/scenarios.h;
 // "paper" is the paper's §8.1) as files the other commands read: groundtruth.txt (TUM), map_gt.ply,
 // camera.yaml, observations.txt, and with --render images/NNNNNN.png.
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <optional>
-#include <algorithm>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 

@@ -1,12 +1,12 @@
 #include "apps/options.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <fstream>
-#include <algorithm>
-#include <csignal>
 #include <stdexcept>
 #include <string>
 

@@ -100,11 +100,7 @@ RotationOnlyResult EstimateRotationOnly(std::span<const Eigen::Vector3d> ref, st
     if (refit_count < count || (refit_count == count && refit_sq >= sq)) break;
     r = refit, flags = std::move(refit_flags), count = refit_count, sq = refit_sq;
   }
-  if (count < need) {
-    out.failure = fmt::format("{} of {} bearings agree on a rotation, {} needed", count, n, need);
-    return out;
-  }
-  out.ok = true;
+  out.ok = true;  // count >= best >= need: a refit is kept only when it keeps at least as many
   out.cam_from_ref = r;
   out.inlier = std::move(flags);
   out.inliers = count;

@@ -761,8 +761,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   fr.cam_from_world = est.cam_from_world;
   fr.pose_inliers = est.inliers;
   last_posed_slot_ = slot;
-  panorama_active_ = false;  // the pose step has points again
-  panorama_bearings_.clear();
+  panorama_bearings_.clear();  // the pose step has points again: a later turn starts afresh
   r.status = FrameStatus::kTracked;
   r.has_pose = true;
   r.cam_from_world = est.cam_from_world;
@@ -792,17 +791,22 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   return r;
 }
 
+std::optional<double> System::RecentNoisePx() const {
+  if (recent_residual_px_.empty()) return std::nullopt;
+  return NoiseFromMedianResidualPx(
+      UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())));
+}
+
 bool System::TrackRotationOnly(int slot, FrameReport* r) {
   // Only right after a posed frame: its centre is where the camera still is if it only turned.
   if (last_posed_slot_ != slot - 1 || last_posed_slot_ < 0) {
-    panorama_active_ = false;
     panorama_bearings_.clear();
     return false;
   }
   auto bearing = [&](const FeatureUndistorted& f) {
     return Eigen::Vector3d(ideal_.PixelToNormalized(f.uv_px).homogeneous().normalized());
   };
-  if (!panorama_active_) {
+  if (panorama_bearings_.empty()) {  // a new turn starts from the last posed frame
     const FrameRecord& prev = map_.frames[last_posed_slot_];
     // The centre: that of the latest frame of the tracked run before whose pose at least half as many points
     // agreed as at the best of the run's recent frames. The last frames before the map left the view hold few
@@ -821,7 +825,6 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
     panorama_bearings_.clear();
     const Eigen::Quaterniond world_from_cam = prev.cam_from_world.q.conjugate();
     for (const FeatureUndistorted& f : prev.features) panorama_bearings_[f.id] = world_from_cam * bearing(f);
-    panorama_active_ = true;
     panorama_min_rms_px_ = std::numeric_limits<double>::infinity();
   }
   FrameRecord& fr = map_.frames[slot];
@@ -833,11 +836,7 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
   // Agreement within the tracks' noise: 3 σ of the difference of two noisy positions (σ √2 per coordinate),
   // σ as the map's recent residuals measure it; never over the pose step's inlier threshold, never under half a
   // pixel (a camera that moves shows as parallax that grows frame after frame, so the bound needs no more).
-  const double noise_px =
-      recent_residual_px_.empty()
-          ? options_.tracker.inlier_threshold_px
-          : NoiseFromMedianResidualPx(
-                UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())));
+  const double noise_px = RecentNoisePx().value_or(options_.tracker.inlier_threshold_px);
   ro.threshold_px = std::clamp(3.0 * std::sqrt(2.0) * noise_px, 0.5, options_.tracker.inlier_threshold_px);
   ro.focal_px = focal_px_;
   ro.min_inliers = options_.rotation_only_min_tracks;
@@ -859,7 +858,6 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
                                     "(the camera moves)", rot.rms_px, panorama_min_rms_px_)
                       : fmt::format("no turn about the last centre: {} of {} tracks agree on one", rot.inliers,
                                     in_world.size());
-    panorama_active_ = false;
     panorama_bearings_.clear();
     return false;
   }
@@ -876,7 +874,6 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
   }
   if (in_view >= options_.rotation_only_min_tracks) {
     r->note = fmt::format("no turn about the last centre: {} map points would be in view", in_view);
-    panorama_active_ = false;
     panorama_bearings_.clear();
     return false;
   }
@@ -926,11 +923,7 @@ int System::TriangulateNewPoints(int slot, int inliers) {
     if (stats.reproj_median_px > 0) recent_residual_px_.push_back(stats.reproj_median_px);
     if (recent_residual_px_.size() > kResidualHistory) recent_residual_px_.pop_front();
   }
-  const double noise_px =
-      recent_residual_px_.empty()
-          ? 0.0
-          : NoiseFromMedianResidualPx(
-                UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())));
+  const double noise_px = RecentNoisePx().value_or(0.0);
   noise_parallax_deg_ = std::min(ParallaxForDepthNoiseDeg(noise_px, focal_px_, mo.max_relative_depth_noise),
                                  mo.max_noise_parallax_deg);
   const double wanted = std::max(mo.min_parallax_deg, noise_parallax_deg_);

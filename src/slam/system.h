@@ -147,12 +147,13 @@ struct SystemOptions {
   int relocalise_min_inliers = 15;
   // When the map leaves the view while the camera only turns (a pan away from what was mapped), no point can be
   // triangulated and the pose step runs out of points. The frame is then posed by its rotation about the last
-  // tracked camera centre, from the bearings of the tracks (Wahba's problem; the rotation-only model of a
-  // panorama), while at least rotation_only_min_tracks of them, and rotation_only_min_ratio of those shared,
-  // agree within the pose step's inlier threshold: a camera that also moves makes the tracks disagree with any
-  // rotation (their parallax grows against the bearings recorded when each track was first seen), and the frame
-  // is lost as before. No keyframe, no point is made from such frames; the map's pose step takes over as soon as
-  // it has points again (lost ones found again by remapping near where the turn projects them).
+  // well-posed camera centre, from the bearings of the tracks (Wahba's problem; the rotation-only model of a
+  // panorama), while fewer than rotation_only_min_tracks map points would be in view, at least that many tracks
+  // and rotation_only_min_ratio of those shared agree within 3 sigma of the tracks' measured noise, and their
+  // residual has not grown (System::TrackRotationOnly): a camera that also moves makes the tracks disagree with
+  // any rotation, and the frame is lost as before. No keyframe, no point is made from such frames; the map's pose
+  // step takes over as soon as it has points again (lost ones found again by remapping near where the turn
+  // projects them). docs/rotation_only.md.
   bool rotation_only = true;
   int rotation_only_min_tracks = 20;
   double rotation_only_min_ratio = 0.7;
@@ -269,6 +270,9 @@ class System {
   // SystemOptions::rotation_only: poses `slot` by its rotation about the last tracked centre when the tracks
   // agree on one; true when it did (r then says so).
   bool TrackRotationOnly(int slot, FrameReport* r);
+  // The tracks' noise sigma (px, per coordinate) from the map's residuals in the recent keyframes; nullopt before
+  // any keyframe has measured one.
+  std::optional<double> RecentNoisePx() const;
   int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
@@ -310,10 +314,10 @@ class System {
   static constexpr size_t kResidualHistory = 15;
   std::deque<double> recent_residual_px_;
   double noise_parallax_deg_ = 0;
-  // Rotation-only tracking (SystemOptions::rotation_only): the centre all its frames share (the last frame the
-  // pose step tracked), and each track's bearing in the world as first seen from there.
+  // Rotation-only tracking (SystemOptions::rotation_only), under way while panorama_bearings_ holds any: the
+  // centre all its frames share (a well-posed frame of the tracked run before), and each track's bearing in the
+  // world as first seen from there.
   static constexpr int kPanoramaCentreLookback = 10;  // frames searched back for a well-posed centre
-  bool panorama_active_ = false;
   Eigen::Vector3d panorama_centre_ = Eigen::Vector3d::Zero();
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;

@@ -31,8 +31,11 @@ SystemOptions FastOptions() {
   return o;
 }
 
+apps::SlamRunResult RunSystem(const apps::SequenceInput& in, const SystemOptions& options, bool gt_scale) {
+  return apps::RunSlam(in, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), gt_scale);
+}
 apps::SlamRunResult RunSystem(const apps::SequenceInput& in, bool gt_scale = true) {
-  return apps::RunSlam(in, FastOptions(), compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), gt_scale);
+  return RunSystem(in, FastOptions(), gt_scale);
 }
 
 TEST(System, CleanScenarioFromObservationsAlone) {
@@ -474,10 +477,8 @@ TEST(System, APanAwayFromTheMapIsTrackedAsATurnAboutTheLastCentre) {
     NewIdsAfterEveryGap(&in);
     SystemOptions with = FastOptions(), without = FastOptions();
     without.rotation_only = false;
-    const apps::SlamRunResult on =
-        apps::RunSlam(in, with, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), false);
-    const apps::SlamRunResult off =
-        apps::RunSlam(in, without, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), false);
+    const apps::SlamRunResult on = RunSystem(in, with, /*gt_scale=*/false);
+    const apps::SlamRunResult off = RunSystem(in, without, /*gt_scale=*/false);
     ASSERT_TRUE(on.initialised && off.initialised) << "seed " << seed;
     int tracked_on = 0, tracked_off = 0, turned = 0;
     double worst_move = 0;
