@@ -41,10 +41,17 @@ echo "== CUDA tests"
 step "${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
 
 echo "== pose kernel (2^18 hypotheses), point kernel"
+lscpu | grep -E "^Model name|^CPU\(s\)|^Flags" | sed 's/^Flags:.*\(avx512f\).*/Flags: ... avx512f .../'
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31 --rounds 3
 step mcslam bench points --compare --repeats 31
 step mcslam bench points --compare --repeats 31 --successive
+step mcslam bench points --compare --repeats 31 --successive --whole
+
+echo "== pose kernel on the GPU against the number of hypotheses (200 points, 3 rounds as run does)"
+for h in 16384 65536 262144 1048576 4194304; do
+  step mcslam bench pose --backend cuda --hypotheses $h --points 200 --rounds 3 --repeats 31 | grep -v '^#'
+done
 
 echo "== whole synthetic run (paper scenario, 1 px noise, 10 % outliers), 3 times on each backend"
 step mcslam synth --out "$W/synth" --noise 1 --outliers 0.1
@@ -58,6 +65,23 @@ for i in 1 2 3; do
     else
       tail -1 "$W/run.log"
     fi
+  done
+done
+for seq in 7scenes_redkitchen_frames000-299 kitti_odometry_06_frames000-050; do
+  [[ -d "$HERE/data/$seq" ]] || { echo "== $seq: not in the bundle, skipped"; continue; }
+  echo "== $seq, default settings, 2 runs on each backend (stages_ms medians from report.json)"
+  cam=()
+  [[ $seq == 7scenes* ]] && echo "525 525 320 240" > "$W/cam7.txt" && cam=(--camera "$W/cam7.txt")
+  for i in 1 2; do
+    for b in cpu cuda; do
+      echo -n "$b run $i: "
+      if ! mcslam run "$HERE/data/$seq" "${cam[@]}" --backend "$b" --out "$W/real_$b" >"$W/run.log" 2>&1; then
+        echo "failed:"; tail -3 "$W/run.log"; failed=1
+      else
+        tail -1 "$W/run.log"
+        python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print('  stages_ms median:', {k: round(v['median_ms'],2) for k,v in r['stages_ms'].items() if isinstance(v,dict) and v.get('median_ms') is not None})" "$W/real_$b/report.json" 2>/dev/null || true
+      fi
+    done
   done
 done
 echo "== done ($([[ $failed == 0 ]] && echo "all steps passed" || echo "some steps FAILED"))"

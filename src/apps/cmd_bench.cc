@@ -42,6 +42,14 @@ void AddBenchBackendFlags(CLI::App* cmd, BenchBackends* b) {
   cmd->add_flag("--compare", b->compare, "CPU and CUDA side by side (the same as --backend cpu,cuda)")->excludes(backend);
 }
 
+void AddWarmFlag(CLI::App* cmd, double* warm_s) {
+  cmd->add_option("--warm-s", *warm_s,
+                  "Seconds of untimed calls before the timed ones (at least one call): an idle GPU or CPU needs a "
+                  "moment of load to reach its clocks")
+      ->check(CLI::Range(0.0, 60.0))
+      ->capture_default_str();
+}
+
 const char* BackendName(compute::BackendKind kind) { return kind == compute::BackendKind::kCuda ? "cuda" : "cpu"; }
 
 // Every kernel first, so that a backend that cannot run is an error before anything is timed; then the
@@ -67,15 +75,20 @@ struct CallTimes {
   double median_ms = 0, min_ms = 0;
 };
 
-// One untimed call (the first call uploads the normal table to a device and grows its buffers), then
-// `repeats` timed ones: wall time of the whole call, so on a device it includes staging and transfers.
+// Untimed calls first, for at least `warm_s` seconds (and at least one call: the first uploads the normal
+// table to a device and grows its buffers; an idle GPU needs some time of load before it runs at its clocks,
+// and a short benchmark would otherwise time the ramp), then `repeats` timed ones: wall time of the whole
+// call, so on a device it includes staging and transfers. call(i) is given i = -1 in the warm-up and
+// 0 .. repeats-1 when timed.
 template <typename Call>
-CallTimes TimeCalls(int repeats, Call&& call) {
-  call();
+CallTimes TimeCalls(int repeats, double warm_s, Call&& call) {
+  const auto warm_start = std::chrono::steady_clock::now();
+  do call(-1);
+  while (std::chrono::duration<double>(std::chrono::steady_clock::now() - warm_start).count() < warm_s);
   std::vector<double> ms;
   for (int r = 0; r < repeats; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    call();
+    call(r);
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
   return {UpperMedian(ms), *std::min_element(ms.begin(), ms.end())};
@@ -87,50 +100,70 @@ struct PoseBenchArgs : BenchBackends {
   int hypotheses = 1 << 18;
   std::vector<int> points{200};
   int repeats = 15;
+  double warm_s = 0.5;
   int rounds = 1;  // the paper's one-shot sampling; `mcslam run` uses PoseTrackerOptions::rounds
 };
 
 // Several backends run one after the other on the same problem and table; after the first, each is
-// compared with the first (time and chosen hypothesis), which makes a quick equivalence check on a GPU.
+// compared with the first (time, and the scores they give every hypothesis of the last call's first round),
+// which makes a quick equivalence check on a GPU.
 void BenchPose(const PoseBenchArgs& a) {
   if (a.rounds > a.hypotheses)
     throw std::invalid_argument(fmt::format("--rounds ({}) must not exceed --hypotheses ({})", a.rounds, a.hypotheses));
   const auto kernels = MakeBenchKernels<compute::PoseKernel>(a, MakePoseKernelFor);
   const compute::NormalTable table(a.hypotheses, 1);
   for (int np : a.points) {
-    // Two point sets in turn, as frames bring new features: a device backend keeps the points of its last
-    // call and sends only new ones, so scoring one set again and again would time no transfer at all.
-    // They differ in one feature by 1e-3 px; both backends make the same number of calls, so their last
-    // (the one compared) scores the same set.
-    const compute::PoseFixture fx(np);
+    // A tracking frame's problem (the camera moved from the prior, noisy features, outliers): the winner is
+    // a sampled hypothesis, as in a run. Two point sets in turn, as frames bring new features: a device
+    // backend keeps the points of its last call and sends only new ones, so scoring one set again and again
+    // would time no transfer at all. They differ in one feature by 1e-3 px; the timed calls are the same on
+    // every backend, so the last (the one compared) scores the same set.
+    compute::PoseFixture fx(np);
+    fx.MoveCamera();
     compute::PoseFixture fx_next = fx;
     fx_next.u[0] += 1e-3f;
-    std::vector<std::pair<CallTimes, compute::BestHypothesis>> runs;
-    for (const auto& kernel : kernels) {
+    const auto sampling = [](const compute::PoseFixture& f, double sq[4], double st[3]) {
+      for (int k = 0; k < 4; ++k) sq[k] = f.sampling.sigma_q[k];
+      for (int k = 0; k < 3; ++k) st[k] = f.sampling.sigma_t[k];
+    };
+    struct Run {
+      CallTimes t;
       compute::BestHypothesis best;
-      int call = 0;
-      const CallTimes t = TimeCalls(a.repeats, [&] {
-        const compute::PoseFixture& f = call++ % 2 == 0 ? fx : fx_next;
-        const double sq[4] = {f.sampling.sigma_q[0], f.sampling.sigma_q[1], f.sampling.sigma_q[2], f.sampling.sigma_q[3]};
-        const double st[3] = {f.sampling.sigma_t[0], f.sampling.sigma_t[1], f.sampling.sigma_t[2]};
-        best = compute::ScoreInRounds(*kernel, f.sampling, sq, st, f.View(), f.params, table, a.hypotheses, a.rounds,
-                                      slam::PoseTrackerOptions{}.round_shrink);
-        if (best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
+      std::vector<float> scores;  // every hypothesis of the compared set's first round
+    };
+    std::vector<Run> runs;
+    for (const auto& kernel : kernels) {
+      Run run;
+      const compute::PoseFixture* last = &fx;
+      run.t = TimeCalls(a.repeats, a.warm_s, [&](int i) {
+        last = i % 2 == 0 ? &fx_next : &fx;  // the warm-up (i = -1) and odd calls: fx
+        double sq[4], st[3];
+        sampling(*last, sq, st);
+        run.best = compute::ScoreInRounds(*kernel, last->sampling, sq, st, last->View(), last->params, table,
+                                          a.hypotheses, a.rounds, slam::PoseTrackerOptions{}.round_shrink);
+        if (run.best.index < 0) throw std::runtime_error("bench: kernel returned no hypothesis");
       });
       fmt::print("bench pose backend={} {} hypotheses={} points={} rounds={} repeats={} frame_ms_median={:.3f} "
                  "frame_ms_min={:.3f} evals_per_s={:.4g}\n",
-                 BackendName(kernel->kind()), Where(kernel->kind()), a.hypotheses, np, a.rounds, a.repeats, t.median_ms,
-                 t.min_ms,
-                 double(a.hypotheses) * np / (t.median_ms * 1e-3));
-      runs.emplace_back(t, best);
+                 BackendName(kernel->kind()), Where(kernel->kind()), a.hypotheses, np, a.rounds, a.repeats, run.t.median_ms,
+                 run.t.min_ms, double(a.hypotheses) * np / (run.t.median_ms * 1e-3));
+      const int first_round = a.hypotheses / a.rounds;
+      run.scores.resize(static_cast<size_t>(first_round));
+      kernel->Score(last->sampling, last->View(), last->params, table, first_round, run.scores.data());
+      runs.push_back(std::move(run));
     }
     for (size_t i = 1; i < runs.size(); ++i) {
-      const auto &[tx, x] = runs[0];
-      const auto &[ty, y] = runs[i];
+      const Run &x = runs[0], &y = runs[i];
+      // The largest difference of a hypothesis's score between the two, per point (px): float rounding in a
+      // different order; and the gap between the two winners' scores, per point.
+      double worst = 0;
+      for (size_t h = 0; h < x.scores.size(); ++h)
+        worst = std::max(worst, std::abs(double(y.scores[h]) - double(x.scores[h])) / std::max(np, 1));
       fmt::print("bench pose compare {}_vs_{} points={} speedup={:.2f} best_index={}/{} best_score={:.6g}/{:.6g} "
-                 "score_rel_diff={:.2e}\n",
-                 BackendName(kernels[i]->kind()), BackendName(kernels[0]->kind()), np, tx.median_ms / ty.median_ms,
-                 y.index, x.index, y.score, x.score, RelDiff(y.score, x.score));
+                 "winner_gap_px_per_point={:.2e} score_diff_px_per_point_max={:.2e}\n",
+                 BackendName(kernels[i]->kind()), BackendName(kernels[0]->kind()), np, x.t.median_ms / y.t.median_ms,
+                 y.best.index, x.best.index, y.best.score, x.best.score,
+                 std::abs(double(y.best.score) - double(x.best.score)) / std::max(np, 1), worst);
     }
   }
 }
@@ -146,7 +179,9 @@ struct PointBenchArgs : BenchBackends {
   int samples = slam::MappingOptions{}.samples;
   int window = slam::MappingOptions{}.window;
   int repeats = 15;
+  double warm_s = 0.5;
   bool successive = false;
+  bool whole = false;  // keyframes not given: a device backend is sent each call's problem whole
 };
 
 // Bytes a CUDA kernel has sent so far (the normal table's excepted); -1 for another backend.
@@ -173,12 +208,12 @@ void BenchPoints(const PointBenchArgs& a) {
     std::vector<std::pair<CallTimes, std::vector<compute::PointBest>>> runs;
     for (const auto& kernel : kernels) {
       std::vector<compute::PointBest> best(np);
-      size_t call = 0;
       long bytes_timed = 0;  // bytes sent before the first timed call (after the warm-up)
-      const CallTimes t = TimeCalls(a.repeats, [&] {
-        if (call == 1) bytes_timed = BytesSent(*kernel);
-        const compute::PointAdjustProblem pr = a.successive ? successive[call].Problem() : fx.Problem();
-        ++call;
+      const CallTimes t = TimeCalls(a.repeats, a.warm_s, [&](int i) {
+        if (i == 0) bytes_timed = BytesSent(*kernel);
+        // The warm-up repeats the first problem; timed call i makes the adjustment of the keyframe after.
+        const compute::PointAdjustProblem pr =
+            a.successive ? successive[static_cast<size_t>(i + 1)].Problem(!a.whole) : fx.Problem();
         kernel->Score(pr, table, a.samples, best.data());
       });
       for (const compute::PointBest& b : best)
@@ -187,7 +222,7 @@ void BenchPoints(const PointBenchArgs& a) {
       fmt::print("bench points backend={} {} points={} keyframes={} observations={} samples={} {}repeats={} "
                  "call_ms_median={:.3f} call_ms_min={:.3f} evals_per_s={:.4g}{}\n",
                  BackendName(kernel->kind()), Where(kernel->kind()), np, a.window, observations, a.samples,
-                 a.successive ? "calls=successive " : "", a.repeats, t.median_ms, t.min_ms,
+                 a.successive ? (a.whole ? "calls=successive,whole " : "calls=successive ") : "", a.repeats, t.median_ms, t.min_ms,
                  evals / (t.median_ms * 1e-3),
                  bytes < 0 ? std::string() : fmt::format(" bytes_sent_per_call={}", (bytes - bytes_timed) / a.repeats));
       runs.emplace_back(t, std::move(best));
@@ -255,6 +290,7 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   pose->add_option("--repeats", pa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
+  AddWarmFlag(pose, &pa->warm_s);
   pose->add_option("--rounds", pa->rounds,
                    "Sampling rounds a frame, the hypotheses split among them as `mcslam run --rounds` does (1: the "
                    "paper's one-shot sampling; run's default is 3)")
@@ -276,10 +312,15 @@ void RegisterBench(CLI::App& app) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   points->add_option("--repeats", qa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
-  points->add_flag("--successive", qa->successive,
+  AddWarmFlag(points, &qa->warm_s);
+  CLI::Option* successive = points->add_flag("--successive", qa->successive,
                    "Time successive keyframes' adjustments, as a run makes them (the window one keyframe on each "
                    "call, each keyframe seeing a twentieth of the points fewer than the next, the keyframes given "
                    "whole so that a GPU keeps them), instead of one adjustment repeated");
+  points->add_flag("--whole", qa->whole,
+                   "With --successive: give each adjustment without its keyframes' ids and features, so that a GPU "
+                   "is sent each problem whole (what keeping the keyframes on the device saves)")
+      ->needs(successive);
   AddBenchBackendFlags(points, qa.get());
   points->callback([qa] { BenchPoints(*qa); });
 

@@ -33,6 +33,35 @@ struct PoseFixture {
   PoseScoringPoints View() const {
     return {x.data(), y.data(), z.data(), u.data(), v.data(), static_cast<int>(x.size())};
   }
+
+  // The shape of a tracking frame instead: the features seen by a camera that moved from the prior (the
+  // identity) by `move_m` along (1, -0.5, 0.8)/|.| and a turn of `turn_deg` about (0.3, 1, 0.2)/|.|, with
+  // Gaussian noise of `noise_px` and a fraction `outliers` of features uniform within +-50 px of the truth;
+  // a 25 px cap. The best hypothesis is then one of the sampled ones, not the centre, and backends that
+  // agree pick hypotheses of the same score (the exact fixture's winner, the centre, scores only rounding).
+  void MoveCamera(float move_m = 0.01f, float turn_deg = 0.5f, float noise_px = 1.0f, float outliers = 0.1f,
+                  uint64_t seed = 17) {
+    const float n_t = std::sqrt(1.0f + 0.25f + 0.64f), n_r = std::sqrt(0.09f + 1.0f + 0.04f);
+    const float half = 0.5f * turn_deg * 3.14159265f / 180.0f;
+    const float q[4] = {std::cos(half), std::sin(half) * 0.3f / n_r, std::sin(half) * 1.0f / n_r,
+                        std::sin(half) * 0.2f / n_r};
+    const float t[3] = {move_m * 1.0f / n_t, move_m * -0.5f / n_t, move_m * 0.8f / n_t};
+    const ScaledPose p = MakeScaledPose(q, t, params.fx, params.fy);
+    CounterRng rng(seed, 1);
+    for (size_t i = 0; i < x.size(); ++i) {
+      const float X[3] = {x[i], y[i], z[i]};
+      const float xc = p.t[0] + p.r[0] * X[0] + p.r[1] * X[1] + p.r[2] * X[2];
+      const float yc = p.t[1] + p.r[3] * X[0] + p.r[4] * X[1] + p.r[5] * X[2];
+      const float zc = p.t[2] + p.r[6] * X[0] + p.r[7] * X[1] + p.r[8] * X[2];
+      u[i] = xc / zc, v[i] = yc / zc;
+      if (rng.Uniform(0.0, 1.0) < outliers) {
+        u[i] += static_cast<float>(rng.Uniform(-50.0, 50.0)), v[i] += static_cast<float>(rng.Uniform(-50.0, 50.0));
+      } else {
+        u[i] += noise_px * static_cast<float>(rng.Normal()), v[i] += noise_px * static_cast<float>(rng.Normal());
+      }
+    }
+    params.max_distance_px = 25.0f;
+  }
 };
 
 // The exact observation of world point X by a camera with pre-scaled pose p (undistorted px minus the

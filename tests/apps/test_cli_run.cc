@@ -330,6 +330,18 @@ TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   ASSERT_EQ(rounds.exit_code, 0) << rounds.output;
   EXPECT_EQ(Field(rounds.output, "rounds"), 3.0) << rounds.output;
   EXPECT_EQ(Field(rounds.output, "hypotheses"), 4096.0) << rounds.output;
+  // Two backends side by side (here the CPU twice) compare their answers on a tracking frame's problem (the
+  // camera moved from the prior, noisy features): the winner is a sampled hypothesis, not the centre (row 0,
+  // which wins only when the features are the prior's exact projections), and the same kernel twice agrees
+  // exactly.
+  const auto two = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 2 --warm-s 0 --backend cpu,cpu");
+  ASSERT_EQ(two.exit_code, 0) << two.output;
+  const size_t at_index = two.output.find("best_index=");
+  ASSERT_NE(at_index, std::string::npos) << two.output;
+  const int first = std::stoi(two.output.substr(at_index + 11));
+  EXPECT_GT(first, 0) << two.output;
+  EXPECT_NE(two.output.find(fmt::format("best_index={}/{} ", first, first)), std::string::npos) << two.output;
+  EXPECT_EQ(Field(two.output, "score_diff_px_per_point_max"), 0.0) << two.output;
   const auto bad = RunMcslam("bench pose --hypotheses 2 --points 5 --rounds 3");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("--rounds (3) must not exceed --hypotheses (2)"), std::string::npos) << bad.output;
@@ -375,6 +387,13 @@ TEST(CliBench, PointsSuccessiveTimesKeyframesInTurn) {
   const auto same = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 1");
   ASSERT_EQ(same.exit_code, 0) << same.output;
   EXPECT_EQ(same.output.find("calls="), std::string::npos) << same.output;
+  // --whole sends each problem without its keyframes: said on the line; only with --successive.
+  const auto whole = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 1 --warm-s 0 --successive --whole");
+  ASSERT_EQ(whole.exit_code, 0) << whole.output;
+  EXPECT_NE(whole.output.find("calls=successive,whole "), std::string::npos) << whole.output;
+  const auto alone = RunMcslam("bench points --points 40 --whole");
+  EXPECT_NE(alone.exit_code, 0);
+  EXPECT_NE(alone.output.find("--whole requires --successive"), std::string::npos) << alone.output;
 }
 
 TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {
