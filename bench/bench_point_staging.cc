@@ -1,13 +1,11 @@
 // Google Benchmark cases for the host side of the CUDA point kernel (plain C++, no GPU needed): what staging a
-// keyframe's point adjustment costs the CPU, whole (a problem without its keyframes) or against the
-// device-resident keyframes (with them, compute/cuda/point_residency.h), over successive keyframes' calls.
-// The paper's claim is that the CPU stays free while the GPU works, so the host's share of a call matters.
+// keyframe's point adjustment costs the CPU, over successive keyframes' calls. The paper's claim is that the
+// CPU stays free while the GPU works, so the host's share of a call matters.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <vector>
 
-#include "compute/cuda/point_residency.h"
 #include "compute/cuda/point_staging.h"
 #include "compute/pose_fixture.h"
 
@@ -16,8 +14,7 @@ namespace {
 using namespace mcslam;
 
 // Successive keyframes' adjustments as `mcslam bench points --successive` makes them: the current keyframe's
-// `points` points over a 12-keyframe window that moves one keyframe a call. 200 calls, cycled (the first call
-// after a wrap finds its keyframes gone: 1 call in 200 sends its whole window).
+// `points` points over a 12-keyframe window that moves one keyframe a call. 200 calls, cycled.
 const std::vector<compute::KeyframeWindowFixture>& Calls(int points) {
   static std::vector<compute::KeyframeWindowFixture> calls;
   static int made_for = -1;
@@ -34,7 +31,7 @@ void BM_PointStagingWhole(benchmark::State& state) {
   std::vector<unsigned char> buf;
   size_t c = 0, bytes = 0;
   for (auto _ : state) {
-    const compute::PointAdjustProblem pr = calls[c++ % calls.size()].Problem(/*with_keyframes=*/false);
+    const compute::PointAdjustProblem pr = calls[c++ % calls.size()].Problem();
     const compute::cuda::PointStagingLayout l = compute::cuda::PlanPointStaging(pr);
     if (buf.size() < l.bytes) buf.resize(l.bytes);
     compute::cuda::StagePointProblem(pr, l, buf.data());
@@ -44,25 +41,7 @@ void BM_PointStagingWhole(benchmark::State& state) {
   state.counters["bytes_per_call"] = benchmark::Counter(static_cast<double>(bytes), benchmark::Counter::kAvgIterations);
 }
 
-void BM_PointStagingResident(benchmark::State& state) {
-  const auto& calls = Calls(static_cast<int>(state.range(0)));
-  compute::cuda::PointResidency residency;
-  std::vector<unsigned char> buf;
-  size_t c = 0, bytes = 0;
-  for (auto _ : state) {
-    const compute::PointAdjustProblem pr = calls[c++ % calls.size()].Problem();
-    const compute::cuda::PointStagingLayout checked = compute::cuda::PlanPointStaging(pr);
-    const compute::cuda::ResidentPointLayout& l = residency.Plan(pr, checked);
-    if (buf.size() < l.bytes) buf.resize(l.bytes);
-    residency.Write(pr, checked, buf.data());
-    benchmark::DoNotOptimize(buf.data());
-    bytes += l.bytes;
-  }
-  state.counters["bytes_per_call"] = benchmark::Counter(static_cast<double>(bytes), benchmark::Counter::kAvgIterations);
-}
-
 BENCHMARK(BM_PointStagingWhole)->Arg(100)->Arg(400)->Arg(1000)->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_PointStagingResident)->Arg(100)->Arg(400)->Arg(1000)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

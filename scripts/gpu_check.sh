@@ -46,7 +46,6 @@ step mcslam bench pose --compare --points 50 200 1000 --repeats 31
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31 --rounds 3
 step mcslam bench points --compare --repeats 31
 step mcslam bench points --compare --repeats 31 --successive
-step mcslam bench points --compare --repeats 31 --successive --whole
 
 echo "== pose kernel on the GPU against the number of hypotheses (200 points, 3 rounds as run does)"
 for h in 16384 65536 262144 1048576 4194304; do

@@ -172,8 +172,7 @@ void BenchPose(const PoseBenchArgs& a) {
 // every keyframe of the window, the System's samples per point and window size by default. --successive:
 // the adjustments of successive keyframes instead, as a run makes them (compute::KeyframeWindowFixture): each
 // call's window one keyframe on, the current keyframe's `points` points adjusted over the keyframes that see
-// them (each keyframe sees a twentieth of its points fewer than the next), and the keyframes given whole as the
-// System gives them, so that a device backend sends only the keyframes it does not hold yet.
+// them (each keyframe sees a twentieth of its points fewer than the next).
 struct PointBenchArgs : BenchBackends {
   std::vector<int> points{400};
   int samples = slam::MappingOptions{}.samples;
@@ -181,7 +180,6 @@ struct PointBenchArgs : BenchBackends {
   int repeats = 15;
   double warm_s = 0.5;
   bool successive = false;
-  bool whole = false;  // keyframes not given: a device backend is sent each call's problem whole
 };
 
 // Bytes a CUDA kernel has sent so far (the normal table's excepted); -1 for another backend.
@@ -213,7 +211,7 @@ void BenchPoints(const PointBenchArgs& a) {
         if (i == 0) bytes_timed = BytesSent(*kernel);
         // The warm-up repeats the first problem; timed call i makes the adjustment of the keyframe after.
         const compute::PointAdjustProblem pr =
-            a.successive ? successive[static_cast<size_t>(i + 1)].Problem(!a.whole) : fx.Problem();
+            a.successive ? successive[static_cast<size_t>(i + 1)].Problem() : fx.Problem();
         kernel->Score(pr, table, a.samples, best.data());
       });
       for (const compute::PointBest& b : best)
@@ -222,7 +220,7 @@ void BenchPoints(const PointBenchArgs& a) {
       fmt::print("bench points backend={} {} points={} keyframes={} observations={} samples={} {}repeats={} "
                  "call_ms_median={:.3f} call_ms_min={:.3f} evals_per_s={:.4g}{}\n",
                  BackendName(kernel->kind()), Where(kernel->kind()), np, a.window, observations, a.samples,
-                 a.successive ? (a.whole ? "calls=successive,whole " : "calls=successive ") : "", a.repeats, t.median_ms, t.min_ms,
+                 a.successive ? "calls=successive " : "", a.repeats, t.median_ms, t.min_ms,
                  evals / (t.median_ms * 1e-3),
                  bytes < 0 ? std::string() : fmt::format(" bytes_sent_per_call={}", (bytes - bytes_timed) / a.repeats));
       runs.emplace_back(t, std::move(best));
@@ -313,14 +311,10 @@ void RegisterBench(CLI::App& app) {
       ->capture_default_str();
   points->add_option("--repeats", qa->repeats, "Timed repetitions")->check(CLI::Range(1, 10000))->capture_default_str();
   AddWarmFlag(points, &qa->warm_s);
-  CLI::Option* successive = points->add_flag("--successive", qa->successive,
+  points->add_flag("--successive", qa->successive,
                    "Time successive keyframes' adjustments, as a run makes them (the window one keyframe on each "
-                   "call, each keyframe seeing a twentieth of the points fewer than the next, the keyframes given "
-                   "whole so that a GPU keeps them), instead of one adjustment repeated");
-  points->add_flag("--whole", qa->whole,
-                   "With --successive: give each adjustment without its keyframes' ids and features, so that a GPU "
-                   "is sent each problem whole (what keeping the keyframes on the device saves)")
-      ->needs(successive);
+                   "call, each keyframe seeing a twentieth of the points fewer than the next), instead of one "
+                   "adjustment repeated");
   AddBenchBackendFlags(points, qa.get());
   points->callback([qa] { BenchPoints(*qa); });
 

@@ -2,7 +2,6 @@
 // The compute layer's point interface (paper §6.2-6.3, Algorithm 2): for every map point to adjust, score
 // random samples around it by their summed reprojection distance over a set of keyframes and return the
 // best sample of each point. One implementation per backend.
-#include <cstdint>
 #include <memory>
 
 #include "compute/backend.h"
@@ -29,19 +28,6 @@ struct PointAdjustProblem {
   const float* obs_u = nullptr;
   const float* obs_v = nullptr;
   PoseScoringParams params;  // fx, fy, cap per observation, min depth
-  // Optional, all five or none: the window's keyframes whole, so that a device backend can keep them on the
-  // device across calls and send only the keyframes it does not hold (compute/cuda/point_residency.h).
-  // pose_ids[k]: keyframe k's id (the frame index; distinct within a call, at least among the keyframes that
-  // observations refer to; an id names the same keyframe from call to call, its pose and features compared by
-  // value, so a moved pose is sent again). keyframe_u/v[keyframe_begin[k] .. keyframe_begin[k + 1]): all of
-  // keyframe k's features (undistorted pixels minus the principal point). obs_feature[o]: observation o's index
-  // among its keyframe's features, which must hold the observation's (obs_u, obs_v) bit for bit. The CPU
-  // backend does not need them.
-  const int64_t* pose_ids = nullptr;
-  const int* keyframe_begin = nullptr;  // num_poses + 1 entries
-  const float* keyframe_u = nullptr;
-  const float* keyframe_v = nullptr;
-  const int* obs_feature = nullptr;
 };
 
 struct PointBest {

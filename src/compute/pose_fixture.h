@@ -143,18 +143,16 @@ struct PointFixture : ArcCameras {
   PointAdjustProblem Problem() const { return PointProblemOf(*this); }
 };
 
-// Successive keyframes' point adjustments as the System makes them (a device backend keeps their keyframes,
-// compute/cuda/point_residency.h). Keyframe k (3 m from the origin, turned by 0.01 k rad about y) sees points
-// k * shift .. k * shift + per_keyframe - 1 (point j within 0.3 m of the origin): those are its features, their
-// exact projections up to 1.5 px off, the same in every call. A call adjusts the points of its current keyframe
-// (the window's first) over the window's keyframes that see them; the centres (a few cm off the truth) are the
-// call's own. KeyframeWindowFixture(c, window): the window is keyframes c + window - 1 (current) down to c, so
-// call c + 1's window is one keyframe on.
+// Successive keyframes' point adjustments as the System makes them. Keyframe k (3 m from the origin, turned by
+// 0.01 k rad about y) sees points k * shift .. k * shift + per_keyframe - 1 (point j within 0.3 m of the
+// origin): those are its features, their exact projections up to 1.5 px off, the same in every call. A call
+// adjusts the points of its current keyframe (the window's first) over the window's keyframes that see them;
+// the centres (a few cm off the truth) are the call's own. KeyframeWindowFixture(c, window): the window is
+// keyframes c + window - 1 (current) down to c, so call c + 1's window is one keyframe on.
 struct KeyframeWindowFixture {
   std::vector<ScaledPose> poses;
-  std::vector<int64_t> pose_ids;
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
-  std::vector<int> begin{0}, pose_idx, obs_feature;
+  std::vector<int> begin{0}, pose_idx;
   std::vector<int> keyframe_begin{0};
   std::vector<float> keyframe_u, keyframe_v;
   PoseScoringParams params;
@@ -178,7 +176,6 @@ struct KeyframeWindowFixture {
       const float t[3] = {0.0f, 0.0f, 3.0f};
       const ScaledPose p = MakeScaledPose(q, t, params.fx, params.fy);
       poses.push_back(p);
-      pose_ids.push_back(k);
       for (int64_t j = k * shift; j < k * shift + per_keyframe; ++j) {
         float X[3];
         point(j, X);
@@ -204,7 +201,6 @@ struct KeyframeWindowFixture {
         if (f < 0 || f >= per_keyframe) continue;
         const int at = keyframe_begin[w] + static_cast<int>(f);
         pose_idx.push_back(static_cast<int>(w));
-        obs_feature.push_back(static_cast<int>(f));
         ou.push_back(keyframe_u[static_cast<size_t>(at)]);
         ov.push_back(keyframe_v[static_cast<size_t>(at)]);
       }
@@ -212,16 +208,7 @@ struct KeyframeWindowFixture {
     }
   }
   int observations() const { return begin.back() - begin.front(); }
-  PointAdjustProblem Problem(bool with_keyframes = true) const {
-    PointAdjustProblem pr = PointProblemOf(*this);
-    if (with_keyframes) {
-      pr.pose_ids = pose_ids.data();
-      pr.keyframe_begin = keyframe_begin.data();
-      pr.keyframe_u = keyframe_u.data(), pr.keyframe_v = keyframe_v.data();
-      pr.obs_feature = obs_feature.data();
-    }
-    return pr;
-  }
+  PointAdjustProblem Problem() const { return PointProblemOf(*this); }
 
  private:
   static std::vector<int64_t> Consecutive(int first, int count) {

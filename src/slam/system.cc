@@ -1115,19 +1115,9 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   const FrameRecord& cur = map_.frames[slot];
   std::vector<int> window;  // frame slots
   std::vector<compute::ScaledPose> poses;
-  // The window's keyframes whole (frame index, every feature): a device backend keeps them across calls.
-  std::vector<int64_t> pose_ids;
-  std::vector<int> keyframe_begin{0};
-  std::vector<float> keyframe_u, keyframe_v;
   for (int ws : WindowSlots()) {
     const FrameRecord& k = map_.frames[ws];
     window.push_back(ws);
-    pose_ids.push_back(k.index);
-    for (const FeatureUndistorted& f : k.features) {
-      keyframe_u.push_back(float(f.uv_px.x() - camera_.cx));
-      keyframe_v.push_back(float(f.uv_px.y() - camera_.cy));
-    }
-    keyframe_begin.push_back(static_cast<int>(keyframe_u.size()));
     const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
     const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
     const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};
@@ -1152,19 +1142,14 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   std::vector<double> before_residual;
   std::vector<std::vector<std::pair<int, Eigen::Vector2d>>> cand_views;
   std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
-  std::vector<int> obs_begin{0}, obs_pose, obs_feature;
+  std::vector<int> obs_begin{0}, obs_pose;
   std::vector<std::pair<int, Eigen::Vector2d>> views;
-  std::vector<int> view_feature;  // each view's index among its keyframe's features
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* p = map_.Find(f.id);
     if (!p || p->state == PointState::kRemoved) continue;
     views.clear();
-    view_feature.clear();
     for (size_t w = 0; w < window.size(); ++w)
-      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) {
-        views.emplace_back(static_cast<int>(w), o->uv_px);
-        view_feature.push_back(static_cast<int>(o - map_.frames[window[w]].features.data()));
-      }
+      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) views.emplace_back(static_cast<int>(w), o->uv_px);
     // Fewer than 3 views: one view cannot tell a point from its ray, and the median of two residuals is not
     // robust to one wrong match, so no verdict is passed on this point yet.
     if (views.size() < 3) continue;
@@ -1192,13 +1177,10 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     const double depth = (cur.cam_from_world * p->position_in_world).z();
     if (!(depth > 0)) continue;  // behind this keyframe: no spread can be derived from it
     const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
-    for (size_t i = 0; i < views.size(); ++i) {
-      // The observation is its keyframe's feature: the very floats a device backend keeps for that keyframe.
-      const int at = keyframe_begin[views[i].first] + view_feature[i];
-      obs_pose.push_back(views[i].first);
-      obs_feature.push_back(view_feature[i]);
-      ou.push_back(keyframe_u[at]);
-      ov.push_back(keyframe_v[at]);
+    for (const auto& [w, uv_obs] : views) {
+      obs_pose.push_back(w);
+      ou.push_back(float(uv_obs.x() - camera_.cx));
+      ov.push_back(float(uv_obs.y() - camera_.cy));
     }
     cand.push_back(p);
     before_residual.push_back(before);
@@ -1221,10 +1203,6 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   pr.obs_u = ou.data(), pr.obs_v = ov.data();
   pr.params.fx = float(camera_.fx), pr.params.fy = float(camera_.fy);
   pr.params.max_distance_px = float(mo.max_distance_px);
-  pr.pose_ids = pose_ids.data();
-  pr.keyframe_begin = keyframe_begin.data();
-  pr.keyframe_u = keyframe_u.data(), pr.keyframe_v = keyframe_v.data();
-  pr.obs_feature = obs_feature.data();
   std::vector<compute::PointBest> best(cand.size());
   point_kernel_->Score(pr, point_normals_, mo.samples, best.data());
 

@@ -387,13 +387,6 @@ TEST(CliBench, PointsSuccessiveTimesKeyframesInTurn) {
   const auto same = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 1");
   ASSERT_EQ(same.exit_code, 0) << same.output;
   EXPECT_EQ(same.output.find("calls="), std::string::npos) << same.output;
-  // --whole sends each problem without its keyframes: said on the line; only with --successive.
-  const auto whole = RunMcslam("bench points --points 40 --samples 512 --window 5 --repeats 1 --warm-s 0 --successive --whole");
-  ASSERT_EQ(whole.exit_code, 0) << whole.output;
-  EXPECT_NE(whole.output.find("calls=successive,whole "), std::string::npos) << whole.output;
-  const auto alone = RunMcslam("bench points --points 40 --whole");
-  EXPECT_NE(alone.exit_code, 0);
-  EXPECT_NE(alone.output.find("--whole requires --successive"), std::string::npos) << alone.output;
 }
 
 TEST(CliBench, CudaWithoutDeviceIsAnErrorNotAFallback) {

@@ -4,14 +4,13 @@
 // block reduction (ties to the lowest index). Only one (score, index) per point comes back; the host makes
 // the winning position from its row, as the CPU backend does.
 //
-// Memory: the normal table on the device, uploaded when it changes (device_normal_table.h). A problem that
-// carries its keyframes whole (what the System gives) keeps them on the device across calls
-// (point_residency.h): a slot per keyframe with its pose and a block of its features. A call stages its
-// centres and spreads, one int per observation and only the keyframes the device does not hold yet into one
-// pinned buffer, copies it in one asynchronous copy, and a small kernel puts the new keyframes into the
-// stores before the scoring kernel reads them. A problem without them is staged whole (point_staging.h). All
-// threads of a block read the same observation at the same time, so the poses and features are read straight
-// from global memory (a broadcast, L1-cached).
+// Memory: the normal table on the device, uploaded when it changes (device_normal_table.h). A call's problem
+// (centres, spreads, keyframe poses, observations) is staged whole into one pinned buffer and sent in one
+// asynchronous copy (point_staging.h). All threads of a block read the same observation at the same time, so
+// the poses and features are read straight from global memory (a broadcast, L1-cached). Keeping the keyframes
+// on the device across calls was tried and measured on an H100: it halved the bytes sent (30 KB instead of
+// 55 KB a keyframe's adjustment) but made a call 14-23 % slower (host bookkeeping of ~18 us against 1-2 us of
+// transfer saved), so each problem is sent whole (docs/gpu.md).
 #include <cub/block/block_reduce.cuh>
 #include <cuda_runtime.h>
 
@@ -21,14 +20,12 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 
 #include "compute/cuda/candidate.h"
 #include "compute/cuda/cuda_check.h"
 #include "compute/cuda/cuda_kernels.h"
 #include "compute/cuda/device_buffer.h"
 #include "compute/cuda/device_normal_table.h"
-#include "compute/cuda/point_residency.h"
 #include "compute/cuda/point_staging.h"
 #include "compute/point_kernel.h"
 #include "compute/pose_math.h"
@@ -41,13 +38,14 @@ namespace {
 constexpr int kPointBlock = 256;  // threads per point; the default 4096 samples are 16 per thread
 
 // Block p scores samples 0 .. samples-1 of point p; thread t takes samples t, t + kPointBlock, ... in
-// increasing order. centres: 6 columns of num_points floats (cx, cy, cz, sx, sy, sz). Observations are read
-// through `obs` (point_residency.h: the call's own arrays, or the device-resident stores).
-template <typename Observations>
+// increasing order. centres: 6 columns of num_points floats (cx, cy, cz, sx, sy, sz); observation o is
+// (obs_u, obs_v)[o] seen by keyframe poses[obs_pose[o]], obs_begin rebased to 0 (point_staging.h).
 __global__ void __launch_bounds__(kPointBlock)
-    ScorePointsKernel(const Observations obs, const float* __restrict__ centres, int num_points,
-                      const int* __restrict__ obs_begin, const PoseScoringParams k, const float* __restrict__ normals,
-                      size_t normal_stride, int samples, Candidate* __restrict__ best_out) {
+    ScorePointsKernel(const ScaledPose* __restrict__ poses, const int* __restrict__ obs_pose,
+                      const float* __restrict__ obs_u, const float* __restrict__ obs_v,
+                      const float* __restrict__ centres, int num_points, const int* __restrict__ obs_begin,
+                      const PoseScoringParams k, const float* __restrict__ normals, size_t normal_stride, int samples,
+                      Candidate* __restrict__ best_out) {
   using BlockReduce = cub::BlockReduce<Candidate, kPointBlock>;
   __shared__ typename BlockReduce::TempStorage reduce_storage;
 
@@ -65,40 +63,22 @@ __global__ void __launch_bounds__(kPointBlock)
                          __ldg(normals + 2 * normal_stride + i), z);
     // Observations in order o0 .. o1-1 as on the CPU (same float sum).
     float acc = 0.0f;
-    for (int o = o0; o < o1; ++o) {
-      const ScaledPose pose = obs.Pose(o);
-      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(pose, z[0], z[1], z[2], obs.U(o), obs.V(o), k, cap);
-    }
+    for (int o = o0; o < o1; ++o)
+      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(poses[obs_pose[o]], z[0], z[1], z[2], obs_u[o],
+                                                                    obs_v[o], k, cap);
     best = BestOf(best, Scored(acc, i));  // an infinite or NaN score is no candidate (candidate.h)
   }
   best = BlockReduce(reduce_storage).Reduce(best, BestOfOp{});
   if (threadIdx.x == 0) best_out[p] = best;
 }
 
-// Puts a call's new keyframes into the device stores: one block per keyframe, its threads over the features.
-constexpr int kUpdateBlock = 256;
-__global__ void __launch_bounds__(kUpdateBlock)
-    ApplyKeyframeUpdatesKernel(const KeyframeUpdate* __restrict__ updates, const FeatureUV* __restrict__ update_features,
-                               int block_shift, ScaledPose* __restrict__ pose_store,
-                               FeatureUV* __restrict__ feature_store) {
-  const KeyframeUpdate u = updates[blockIdx.x];
-  const int n = u.count > 1 ? u.count : 1;  // i == 0 writes the pose even for a keyframe without features
-  for (int i = static_cast<int>(threadIdx.x); i < n; i += kUpdateBlock)
-    ApplyKeyframeUpdate(u, i, update_features, block_shift, pose_store, feature_store);
-}
-
 struct PointResources {
   Stream stream;
   DeviceNormalTable table;
-  PinnedBuffer<unsigned char> host_problem;  // staged as point_staging.h or point_residency.h plans it
+  PinnedBuffer<unsigned char> host_problem;  // staged as point_staging.h plans it
   DeviceBuffer<unsigned char> problem;
   DeviceBuffer<Candidate> best;  // one per point
   PinnedBuffer<Candidate> host_best;
-  // The device-resident keyframes (poses and feature blocks) of problems that carry them, and the host's
-  // record of them.
-  PointResidency residency;
-  DeviceBuffer<ScaledPose> pose_store;
-  DeviceBuffer<FeatureUV> feature_store;
   long calls = 0;
   long bytes_uploaded = 0;  // staged problems sent (the normal table not counted)
 };
@@ -136,7 +116,6 @@ class CudaPointKernel final : public PointKernel {
       return;
     }
     const PointStagingLayout layout = PlanPointStaging(pr);  // throws std::invalid_argument
-    const bool resident = PointResidency::Wanted(pr, layout);  // likewise
 
     const std::lock_guard<std::mutex> call_lock(call_mutex_);  // one call at a time per kernel object
     ScopedDevice scoped(device_);
@@ -147,55 +126,23 @@ class CudaPointKernel final : public PointKernel {
     const size_t np = static_cast<size_t>(pr.num_points);
     Candidate* d_best = r.best.Reserve(np);
     Candidate* h_best = r.host_best.Reserve(np);
-    // With keyframes, the call's plan against the device-resident stores (throws std::invalid_argument, as above).
-    const ResidentPointLayout* rl = resident ? &r.residency.Plan(pr, layout) : nullptr;
     try {
-      const size_t bytes = resident ? rl->bytes : layout.bytes;
-      unsigned char* h_problem = r.host_problem.Reserve(bytes);
-      if (resident) {
-        r.residency.Write(pr, layout, h_problem);
-      } else {
-        StagePointProblem(pr, layout, h_problem);
-      }
-      unsigned char* d_problem = r.problem.Reserve(bytes);
-      // The stores only grow, and the record knows when they do (Plan grew it, and everything it asks for is
-      // sent again): a reallocation here loses nothing the record still counts on. Reserved before the copy is
-      // enqueued, so that a reallocation's cudaFree does not wait for it.
-      ScaledPose* d_poses = resident ? r.pose_store.Reserve(r.residency.pose_capacity()) : nullptr;
-      FeatureUV* d_features = resident ? r.feature_store.Reserve(r.residency.feature_capacity()) : nullptr;
-      MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, bytes, cudaMemcpyHostToDevice, stream));
-      const auto score = [&](const auto& obs, size_t centres, size_t obs_begin, const char* name) {
-        using Observations = std::decay_t<decltype(obs)>;
-        ScorePointsKernel<Observations><<<static_cast<unsigned>(pr.num_points), kPointBlock, 0, stream>>>(
-            obs, reinterpret_cast<const float*>(d_problem + centres), pr.num_points,
-            reinterpret_cast<const int*>(d_problem + obs_begin), pr.params, d_normals, r.table.stride(), samples,
-            d_best);
-        MCSLAM_CUDA_CHECK_LAUNCH(name);
-      };
-      if (resident) {
-        if (rl->num_keyframe_updates > 0) {
-          ApplyKeyframeUpdatesKernel<<<static_cast<unsigned>(rl->num_keyframe_updates), kUpdateBlock, 0, stream>>>(
-              reinterpret_cast<const KeyframeUpdate*>(d_problem + rl->keyframe_updates),
-              reinterpret_cast<const FeatureUV*>(d_problem + rl->update_features), rl->block_shift, d_poses,
-              d_features);
-          MCSLAM_CUDA_CHECK_LAUNCH("ApplyKeyframeUpdatesKernel");
-        }
-        score(ResidentObservations{d_poses, d_features, reinterpret_cast<const int*>(d_problem + rl->obs_index),
-                                   rl->block_shift},
-              rl->centres, rl->obs_begin, "ScorePointsKernel<resident>");
-      } else {
-        score(DirectObservations{reinterpret_cast<const ScaledPose*>(d_problem + layout.poses),
-                                 reinterpret_cast<const int*>(d_problem + layout.obs_pose),
-                                 reinterpret_cast<const float*>(d_problem + layout.obs_u),
-                                 reinterpret_cast<const float*>(d_problem + layout.obs_v)},
-              layout.centres, layout.obs_begin, "ScorePointsKernel<direct>");
-      }
+      unsigned char* h_problem = r.host_problem.Reserve(layout.bytes);
+      StagePointProblem(pr, layout, h_problem);
+      unsigned char* d_problem = r.problem.Reserve(layout.bytes);
+      MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_problem, h_problem, layout.bytes, cudaMemcpyHostToDevice, stream));
+      ScorePointsKernel<<<static_cast<unsigned>(pr.num_points), kPointBlock, 0, stream>>>(
+          reinterpret_cast<const ScaledPose*>(d_problem + layout.poses),
+          reinterpret_cast<const int*>(d_problem + layout.obs_pose), reinterpret_cast<const float*>(d_problem + layout.obs_u),
+          reinterpret_cast<const float*>(d_problem + layout.obs_v), reinterpret_cast<const float*>(d_problem + layout.centres),
+          pr.num_points, reinterpret_cast<const int*>(d_problem + layout.obs_begin), pr.params, d_normals,
+          r.table.stride(), samples, d_best);
+      MCSLAM_CUDA_CHECK_LAUNCH("ScorePointsKernel");
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(h_best, d_best, sizeof(Candidate) * np, cudaMemcpyDeviceToHost, stream));
       r.stream.Synchronize();
-      r.bytes_uploaded += static_cast<long>(bytes);
+      r.bytes_uploaded += static_cast<long>(layout.bytes);
     } catch (...) {
       cudaStreamSynchronize(stream);  // the pinned buffers are not reused while a copy may still read them
-      if (resident) r.residency.Invalidate();  // what this call meant to put on the device may not be there
       throw;
     }
     ++r.calls;
@@ -226,8 +173,7 @@ class CudaPointKernel final : public PointKernel {
     st.table_uploads = r.table.uploads();
     st.point_uploads = r.calls;  // one copy of the call's staged problem per call
     st.bytes_uploaded = r.bytes_uploaded;
-    st.device_allocations = r.table.allocations() + r.problem.allocations() + r.best.allocations() +
-                            r.pose_store.allocations() + r.feature_store.allocations();
+    st.device_allocations = r.table.allocations() + r.problem.allocations() + r.best.allocations();
     st.pinned_allocations = r.host_problem.allocations() + r.host_best.allocations();
     return st;
   }

@@ -1,8 +1,7 @@
 #pragma once
 // Host side of the CUDA point kernel: the checks that keep the device from reading out of bounds (every
 // call), and the layout of the one buffer that carries a whole PointAdjustProblem to the device (one copy per
-// call) when the problem does not carry its keyframes (when it does, point_residency.h stages only the
-// keyframes the device lacks). Plain C++17: the host tests check it without a GPU.
+// call). Plain C++17: the host tests check it without a GPU.
 #include <cstddef>
 #include <cstring>
 #include <stdexcept>
@@ -76,8 +75,8 @@ inline PointStagingLayout PlanPointStaging(const PointAdjustProblem& pr) {
 }
 
 // Writes the problem into dst (l.bytes bytes, laid out as planned).
-// The part every staged call carries, whole or with its keyframes kept (point_residency.h): the centres and
-// spreads as 6 columns of num_points floats at `centres`, and obs_begin rebased by first_obs at `obs_begin`.
+// The centres and spreads as 6 columns of num_points floats at `centres`, and obs_begin rebased by first_obs at
+// `obs_begin`.
 inline void StagePointColumns(const PointAdjustProblem& pr, int first_obs, unsigned char* centres,
                               unsigned char* obs_begin) {
   const size_t np = static_cast<size_t>(pr.num_points);
