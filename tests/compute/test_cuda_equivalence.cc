@@ -335,9 +335,9 @@ TEST(CudaEquivalence, PoseKernelMatchesCpu) {
   auto gpu = CudaPose();
   EXPECT_EQ(gpu->kind(), BackendKind::kCuda);
   const NormalTable table(5000, 11);
-  // 0 .. 2048 points: constant memory; 2049 and up: global memory through shared tiles (3000: a partial
-  // last tile). 5000 hypotheses: a partial last block.
-  for (int points : {0, 1, 17, 200, 2048, 2049, 3000}) {
+  // Points through shared tiles of 256: none, part of one tile, exactly one and eight, and partial last
+  // tiles. 5000 hypotheses: a partial last block.
+  for (int points : {0, 1, 17, 200, 256, 2048, 2049, 3000}) {
     PoseFixture fx(points);
     fx.params.max_distance_px = 25.0f;  // exercise the cap too
     ExpectPoseEquivalent(*gpu, fx, table, 5000, "points " + std::to_string(points));
@@ -452,7 +452,7 @@ TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
   ExpectPoseEquivalent(*gpu, fx, other, other.count(), "other table");
   ExpectPoseEquivalent(*gpu, fx, table, table.count(), "first table again");
   EXPECT_EQ(Stats(*gpu).table_uploads, 4);
-  // Two kernels in turn (the constant memory they share holds each one's points in its own call).
+  // Two kernels in turn: each scores its own points.
   auto second = CudaPose();
   const PoseFixture other_points(300, /*seed=*/8);
   const BestHypothesis x = second->Score(other_points.sampling, other_points.View(), other_points.params, table, 4096);
@@ -464,8 +464,8 @@ TEST(CudaEquivalence, PoseKernelReusesBuffersAndFollowsTableChanges) {
 }
 
 // Points kept on the device between calls: a call whose points changed, even by one ulp in one feature,
-// scores the new points; the same points again score as before; both memory paths (constant memory up to
-// 2048 points, global memory above), and another kernel's points in constant memory in between.
+// scores the new points; the same points again score as before (one tile and several); another kernel's calls
+// in between change nothing of it.
 TEST(CudaEquivalence, PoseKernelScoresTheCallsOwnPointsWhenTheyChange) {
   REQUIRE_CUDA_DEVICE();
   const NormalTable table(1 << 14, 12);
@@ -485,12 +485,12 @@ TEST(CudaEquivalence, PoseKernelScoresTheCallsOwnPointsWhenTheyChange) {
     fx.z[np - 1] = std::nextafter(fx.z[np - 1], 100.0f);
     ExpectPoseEquivalent(*gpu, fx, table, table.count(), std::to_string(np) + " points, one ulp");
     EXPECT_EQ(Stats(*gpu).point_uploads, 3) << np;
-    // Another kernel writes its own points (constant memory is shared): ours are sent again.
+    // Another kernel scores its own points: ours stay on the device, not sent again.
     auto other = CudaPose();
     const PoseFixture others(150, /*seed=*/6);
     ExpectPoseEquivalent(*other, others, table, table.count(), "the other kernel");
     ExpectPoseEquivalent(*gpu, fx, table, table.count(), std::to_string(np) + " points after another kernel");
-    EXPECT_EQ(Stats(*gpu).point_uploads, np <= 2048 ? 4 : 3) << np;
+    EXPECT_EQ(Stats(*gpu).point_uploads, 3) << np;
   }
 }
 

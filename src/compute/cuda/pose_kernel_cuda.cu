@@ -5,16 +5,17 @@
 //
 // Memory: the normal table lives on the device, uploaded when the table changes (device_normal_table.h).
 // The points and features (x, y, z, u, v) are staged in pinned memory and copied asynchronously on the
-// kernel's stream: into constant memory when there are at most kMaxConstantPoints of them (every thread of
-// a warp reads the same point at the same time: the constant cache's broadcast case), else into global
-// memory, from which each block reads them through shared-memory tiles. They stay there: a call with the
-// very points of the call before (a frame's second and third sampling rounds) sends nothing but the
-// sampling centre and spreads, which travel as kernel arguments (pose_staging.h).
+// kernel's stream into global memory, from which each block reads them through shared-memory tiles (every
+// thread of a block reads the same point at the same time: a shared-memory broadcast). They stay there: a
+// call with the very points of the call before (a frame's second and third sampling rounds) sends nothing but
+// the sampling centre and spreads, which travel as kernel arguments (pose_staging.h). Constant memory, the
+// textbook place for data every thread reads in step, was measured 4-11x slower on an H100 once a call has
+// more than about 700 blocks (the warps of an SM drift apart and thrash the constant cache: 2^18 hypotheses x
+// 2000 points 6.6 ms against 0.62 ms through shared tiles; docs/gpu.md), and was dropped.
 #include <cub/block/block_reduce.cuh>
 #include <cuda_runtime.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -38,39 +39,13 @@ namespace {
 
 constexpr int kPoseBlock = 256;    // hypotheses per block
 constexpr int kReduceBlock = 256;  // threads of the second pass
-constexpr int kTilePoints = 256;   // points per shared-memory tile (global-memory path)
-constexpr int kMaxConstantPoints = 2048;  // 5 x 2048 floats = 40 KiB of the 64 KiB of constant memory
+constexpr int kTilePoints = 256;   // points per shared-memory tile
 static_assert(kTilePoints % kPoseBlock == 0 || kPoseBlock % kTilePoints == 0);
-
-// Points as 5 columns of `num_points` floats: x, y, z, u, v. One per device (a __constant__ symbol is
-// per context), shared by every pose kernel of the process: ConstantPointsMutex serialises its users.
-__constant__ float c_points[5 * kMaxConstantPoints];
-
-// Held from the copy into c_points until the stream that reads it has finished, so that two CUDA pose
-// kernels used from two host threads never see each other's points.
-std::mutex& ConstantPointsMutex() {
-  static std::mutex m;
-  return m;
-}
-
-// The kernel object whose points c_points holds (its id; 0: none), read and written under
-// ConstantPointsMutex. One for the process, not one per device: a kernel on another device writing its
-// own c_points makes the others send theirs again, which is only ever one copy too many.
-uint64_t& ConstantPointsOwner() {
-  static uint64_t owner = 0;
-  return owner;
-}
-
-uint64_t NewKernelId() {
-  static std::atomic<uint64_t> next{1};
-  return next.fetch_add(1);
-}
 
 // Scores hypotheses [blockIdx.x * kPoseBlock, +kPoseBlock) of `count`; writes each score to scores[h]
 // when scores is not null, and the block's best to block_best[blockIdx.x]. Threads past `count` score row
 // 0 (valid memory) and take part in the tiles and the reduction, but their result is NoCandidate, as is a
 // score that is infinite or NaN (candidate.h: Scored).
-template <bool kConstantPoints>
 __global__ void __launch_bounds__(kPoseBlock)
     ScorePosesKernel(const PoseSampling s, const PoseScoringParams k, const float* __restrict__ normals,
                      size_t normal_stride, const float* __restrict__ points, int num_points, int count,
@@ -91,31 +66,23 @@ __global__ void __launch_bounds__(kPoseBlock)
 
   // The residual loop of Algorithm 1, points in order 0 .. num_points-1 as on the CPU (same float sum).
   float acc = 0.0f;
-  if constexpr (kConstantPoints) {
-    // Indexed on the symbol itself, so that the loads stay constant-memory loads (warp-uniform: broadcast).
-    for (int j = 0; j < num_points; ++j)
-      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(
-          p, c_points[j], c_points[num_points + j], c_points[2 * num_points + j], c_points[3 * num_points + j],
-          c_points[4 * num_points + j], k, cap);
-  } else {
-    __shared__ float tile[5][kTilePoints];
-    const size_t n_all = static_cast<size_t>(num_points);
-    for (int j0 = 0; j0 < num_points; j0 += kTilePoints) {
-      const int n = min(kTilePoints, num_points - j0);
-      __syncthreads();  // every thread is done with the previous tile
-      for (int i = static_cast<int>(threadIdx.x); i < n; i += kPoseBlock) {
-        const size_t j = static_cast<size_t>(j0 + i);
-        tile[0][i] = __ldg(points + j);
-        tile[1][i] = __ldg(points + n_all + j);
-        tile[2][i] = __ldg(points + 2 * n_all + j);
-        tile[3][i] = __ldg(points + 3 * n_all + j);
-        tile[4][i] = __ldg(points + 4 * n_all + j);
-      }
-      __syncthreads();  // the tile is complete
-      for (int j = 0; j < n; ++j)
-        acc += ReprojectionDistanceT<ScalarMath, float, float, float>(p, tile[0][j], tile[1][j], tile[2][j],
-                                                                      tile[3][j], tile[4][j], k, cap);
+  __shared__ float tile[5][kTilePoints];
+  const size_t n_all = static_cast<size_t>(num_points);
+  for (int j0 = 0; j0 < num_points; j0 += kTilePoints) {
+    const int n = min(kTilePoints, num_points - j0);
+    __syncthreads();  // every thread is done with the previous tile
+    for (int i = static_cast<int>(threadIdx.x); i < n; i += kPoseBlock) {
+      const size_t j = static_cast<size_t>(j0 + i);
+      tile[0][i] = __ldg(points + j);
+      tile[1][i] = __ldg(points + n_all + j);
+      tile[2][i] = __ldg(points + 2 * n_all + j);
+      tile[3][i] = __ldg(points + 3 * n_all + j);
+      tile[4][i] = __ldg(points + 4 * n_all + j);
     }
+    __syncthreads();  // the tile is complete
+    for (int j = 0; j < n; ++j)
+      acc += ReprojectionDistanceT<ScalarMath, float, float, float>(p, tile[0][j], tile[1][j], tile[2][j], tile[3][j],
+                                                                    tile[4][j], k, cap);
   }
 
   if (active && scores != nullptr) scores[h] = acc;
@@ -135,9 +102,6 @@ __global__ void __launch_bounds__(kReduceBlock)
   if (threadIdx.x == 0) *out = best;
 }
 
-// Where the staged points are on the device as well (valid only after a call that completed).
-enum class PointsOnDevice { kNone, kConstant, kGlobal };
-
 // Everything that lives on (or is pinned for) the device; destroyed with the kernel's device current.
 
 struct PoseResources {
@@ -145,10 +109,10 @@ struct PoseResources {
   DeviceNormalTable table;
   PinnedBuffer<float> host_points;     // 5 columns of staged points (pose_staging.h)
   int staged_count = -1;               // points in host_points; -1: none staged
-  PointsOnDevice on_device = PointsOnDevice::kNone;
+  bool on_device = false;              // the staged points are in `points` too (only after a call that completed)
   long point_uploads = 0;
   long bytes_uploaded = 0;
-  DeviceBuffer<float> points;          // the same, when they do not fit in constant memory
+  DeviceBuffer<float> points;          // the same, on the device
   DeviceBuffer<Candidate> block_best;  // one per block of the scoring kernel
   DeviceBuffer<Candidate> best;        // the winner
   DeviceBuffer<float> scores;          // every score, only when the caller asks for them
@@ -158,7 +122,7 @@ struct PoseResources {
 
 class CudaPoseKernel final : public PoseKernel {
  public:
-  explicit CudaPoseKernel(int device) : device_(device), id_(NewKernelId()) {
+  explicit CudaPoseKernel(int device) : device_(device) {
     const int n = CudaDeviceCount();
     if (device < 0 || device >= n)
       throw std::runtime_error("CUDA pose kernel: no CUDA device " + std::to_string(device) + " (" +
@@ -201,7 +165,7 @@ class CudaPoseKernel final : public PoseKernel {
     // already staged.
     const bool same_points = r.staged_count >= 0 && SameAsStaged(pts, r.host_points.get(), r.staged_count);
     if (!same_points) {
-      r.on_device = PointsOnDevice::kNone;
+      r.on_device = false;
       r.staged_count = -1;  // stays so if Reserve throws
       StagePosePoints(pts, r.host_points.Reserve(StagedPosePointFloats(np)));
       r.staged_count = np;
@@ -215,36 +179,18 @@ class CudaPoseKernel final : public PoseKernel {
     Candidate* h_best = r.host_best.Reserve(1);
     float* d_scores = all_scores != nullptr ? r.scores.Reserve(count) : nullptr;
 
-    const bool in_constant = np <= kMaxConstantPoints;
-    std::unique_lock<std::mutex> constant_lock(ConstantPointsMutex(), std::defer_lock);
-    if (in_constant) constant_lock.lock();
     try {
-      if (in_constant) {
-        // c_points is shared: ours only if no other kernel wrote it since we did. No points: nothing to send,
-        // nothing read, and another kernel's points stay where they are.
-        if (np > 0 && !(same_points && r.on_device == PointsOnDevice::kConstant && ConstantPointsOwner() == id_)) {
-          r.on_device = PointsOnDevice::kNone;
-          ConstantPointsOwner() = id_;
-          MCSLAM_CUDA_CHECK(cudaMemcpyToSymbolAsync(c_points, staged, point_bytes, 0, cudaMemcpyHostToDevice, stream));
-          ++r.point_uploads;
-          r.bytes_uploaded += static_cast<long>(point_bytes);
-        }
-        ScorePosesKernel<true><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), nullptr, np,
-                                                                  count, d_scores, d_block_best);
-        MCSLAM_CUDA_CHECK_LAUNCH("ScorePosesKernel<constant points>");
-      } else {
-        // The same count as the call that left them there: no reallocation, the points are still there.
-        float* d_points = r.points.Reserve(StagedPosePointFloats(np));
-        if (!(same_points && r.on_device == PointsOnDevice::kGlobal)) {
-          r.on_device = PointsOnDevice::kNone;
-          MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_points, staged, point_bytes, cudaMemcpyHostToDevice, stream));
-          ++r.point_uploads;
-          r.bytes_uploaded += static_cast<long>(point_bytes);
-        }
-        ScorePosesKernel<false><<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), d_points, np,
-                                                                   count, d_scores, d_block_best);
-        MCSLAM_CUDA_CHECK_LAUNCH("ScorePosesKernel<global points>");
+      // The same count as the call that left them there: no reallocation, the points are still there.
+      float* d_points = r.points.Reserve(std::max<size_t>(StagedPosePointFloats(np), 1));
+      if (np > 0 && !(same_points && r.on_device)) {
+        r.on_device = false;
+        MCSLAM_CUDA_CHECK(cudaMemcpyAsync(d_points, staged, point_bytes, cudaMemcpyHostToDevice, stream));
+        ++r.point_uploads;
+        r.bytes_uploaded += static_cast<long>(point_bytes);
       }
+      ScorePosesKernel<<<blocks, kPoseBlock, 0, stream>>>(s, k, d_normals, r.table.stride(), d_points, np, count,
+                                                         d_scores, d_block_best);
+      MCSLAM_CUDA_CHECK_LAUNCH("ScorePosesKernel");
       ReduceCandidatesKernel<<<1, kReduceBlock, 0, stream>>>(d_block_best, blocks, d_best);
       MCSLAM_CUDA_CHECK_LAUNCH("ReduceCandidatesKernel");
       MCSLAM_CUDA_CHECK(cudaMemcpyAsync(h_best, d_best, sizeof(Candidate), cudaMemcpyDeviceToHost, stream));
@@ -252,15 +198,14 @@ class CudaPoseKernel final : public PoseKernel {
         MCSLAM_CUDA_CHECK(
             cudaMemcpyAsync(all_scores, d_scores, sizeof(float) * count, cudaMemcpyDeviceToHost, stream));
       r.stream.Synchronize();
-      r.on_device = in_constant ? PointsOnDevice::kConstant : PointsOnDevice::kGlobal;
+      r.on_device = true;
     } catch (...) {
       // Whatever was enqueued finishes before the lock (and the staged points) can be reused; the next call
       // sends its points again.
       cudaStreamSynchronize(stream);
-      r.on_device = PointsOnDevice::kNone;
+      r.on_device = false;
       throw;
     }
-    if (constant_lock.owns_lock()) constant_lock.unlock();
     ++r.calls;
 
     const Candidate best = *h_best;
@@ -295,7 +240,6 @@ class CudaPoseKernel final : public PoseKernel {
 
  private:
   int device_;
-  uint64_t id_;            // this kernel's name as ConstantPointsOwner
   std::mutex call_mutex_;  // the buffers and the stream serve one Score call at a time
   std::unique_ptr<PoseResources> res_;
 };
