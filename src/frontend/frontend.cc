@@ -21,6 +21,7 @@
 
 #include "frontend/kalman.h"
 #include "frontend/patch_align.h"
+#include "frontend/sift_describer.h"
 
 namespace mcslam::frontend {
 namespace {
@@ -72,38 +73,6 @@ cv::Mat ToGray8(const cv::Mat& image, int64_t index) {
 }
 
 Eigen::Vector2d ToEigen(const cv::Point2f& p) { return {p.x, p.y}; }
-
-// Upright SIFT descriptors at given points, one small patch per point: the cost follows the number of
-// points, not the image size, and the patch holds everything the descriptor reads, so the values are those
-// of a whole-image computation.
-class SiftDescriber {
- public:
-  explicit SiftDescriber(double size_px) : size_px_(static_cast<float>(size_px)), sift_(cv::SIFT::create()) {
-    // OpenCV's SIFT reads, for an upright keypoint, pixels less than (4 + 1) / 2 cells of 3 * size / 2 px
-    // from it, from its first Gaussian level, whose blur (sigma ~1.5) reaches 6 px further.
-    radius_px_ = static_cast<int>(std::ceil(2.5 * 1.5 * size_px)) + 1 + 7;
-  }
-
-  // false when SIFT gives nothing for the point (it should not happen for a point inside the image).
-  bool Describe(const cv::Mat& gray, const cv::Point2f& uv, Descriptor* out) const {
-    const int x = static_cast<int>(std::floor(uv.x)), y = static_cast<int>(std::floor(uv.y));
-    const cv::Rect roi = cv::Rect(x - radius_px_, y - radius_px_, 2 * radius_px_ + 2, 2 * radius_px_ + 2) &
-                         cv::Rect(0, 0, gray.cols, gray.rows);
-    if (roi.empty()) return false;
-    std::vector<cv::KeyPoint> kp{cv::KeyPoint(uv.x - static_cast<float>(roi.x), uv.y - static_cast<float>(roi.y),
-                                              size_px_, 0.0f /* upright */, 0.0f, 0 /* octave 0, layer 0 */)};
-    cv::Mat desc;
-    sift_->compute(gray(roi), kp, desc);
-    if (desc.rows != 1 || desc.cols != kDescriptorLength || desc.type() != CV_32F) return false;
-    std::copy(desc.ptr<float>(0), desc.ptr<float>(0) + kDescriptorLength, out->begin());
-    return true;
-  }
-
- private:
-  float size_px_;
-  int radius_px_ = 0;
-  cv::Ptr<cv::SIFT> sift_;
-};
 
 struct Track {
   int64_t id = 0;
@@ -298,13 +267,8 @@ struct Frontend::Impl {
     pending = true;
     auto work = [this, gray, points = std::move(points)](const SiftDescriber& d) {
       const auto t0 = Clock::now();
-      for (size_t k = 0; k < points.size(); ++k) {
-        try {
-          pending_ok[k] = d.Describe(gray, points[k], &pending_descriptors[k]);
-        } catch (const cv::Exception&) {
-          pending_ok[k] = 0;  // the track simply has no descriptor: it cannot be remapped, nothing else changes
-        }
-      }
+      // A track without a descriptor simply cannot be remapped; nothing else changes.
+      d.DescribeAll(gray, points, &pending_descriptors, &pending_ok);
       pending_ms = MsSince(t0);
     };
     if (options.describe_async) {
@@ -694,12 +658,17 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
         }
       }
     }
-    for (auto& [k, d] : descriptors) {
-      Descriptor desc;
-      try {
-        if (describer.Describe(gray, candidates[k].uv, &desc)) d = desc;
-      } catch (const cv::Exception&) {
-        // No descriptor: this candidate cannot match.
+    {  // every candidate of some window described at once (a candidate without a descriptor cannot match)
+      std::vector<cv::Point2f> at;
+      at.reserve(descriptors.size());
+      for (const auto& [k, d] : descriptors) at.push_back(candidates[k].uv);
+      std::vector<Descriptor> desc;
+      std::vector<char> ok;
+      describer.DescribeAll(gray, at, &desc, &ok);
+      size_t n = 0;
+      for (auto& [k, d] : descriptors) {
+        if (ok[n]) d = desc[n];
+        ++n;
       }
     }
     struct Match {
