@@ -40,6 +40,28 @@ mcslam() { "${RUN[@]}" "$W/bin/mcslam" "$@"; }
 echo "== CUDA tests"
 step "${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
 
+if [[ -n "${GPU_CHECK_SUITE:-}" ]]; then
+  # The whole suite (a bundle packed with ALL_TESTS=1): each test binary, the shared sequences from the bundle.
+  # Left out: the tests that read or write video or open a webcam (one writes an MP4 overlay), which need
+  # OpenCV's video plugins, stubbed in the bundle. GPU_CHECK_SUITE=only: nothing else.
+  build=$(cat "$W/build_path")
+  mkdir -p "$(dirname "$build")" && ln -sfn "$W/bin" "$build"
+  echo "== whole test suite ($(nproc) cores, every test binary at once; tests run mcslam as $build/mcslam)"
+  for t in "$W"/bin/test_*; do
+    ( env MCSLAM_DATA="$HERE/data" "${RUN[@]}" "$t" --gtest_brief=1 \
+        --gtest_filter='-*Video*:*Webcam*:CliImages.ImageFolderRunsEndToEndAndWritesEveryOutput' >"$t.log" 2>&1
+      echo "exit status $?" >>"$t.log" ) &
+  done
+  wait
+  for t in "$W"/bin/test_*; do
+    [[ "$t" == *.log ]] && continue
+    echo "-- $(basename "$t")"
+    cat "$t.log"
+    tail -1 "$t.log" | grep -q "exit status 0" || { echo "gpu_check: FAILED: $(basename "$t")"; failed=1; }
+  done
+  [[ "$GPU_CHECK_SUITE" == only ]] && return $failed
+fi
+
 echo "== pose kernel (2^18 hypotheses), point kernel"
 lscpu | grep -E "^Model name|^CPU\(s\)|^Flags" | sed 's/^Flags:.*\(avx512f\).*/Flags: ... avx512f .../'
 step mcslam bench pose --compare --points 50 200 1000 --repeats 31
