@@ -202,8 +202,12 @@ void ObservePoints(double noise_px, double outlier_fraction, uint64_t seed, cons
       o.is_outlier = outlier;
       if (outlier) {
         // Rejection sampling: the excluded disc is a tiny part of the image, so this ends fast.
+        // v drawn before u: the order in which GCC evaluated Eigen::Vector2d(Uniform(), Uniform())'s arguments
+        // (unspecified in C++; clang goes left to right), which the scenarios' figures depend on.
         do {
-          o.uv_px = Eigen::Vector2d(pixel_rng.Uniform(0.0, cam.width - 1.0), pixel_rng.Uniform(0.0, cam.height - 1.0));
+          const double v = pixel_rng.Uniform(0.0, cam.height - 1.0);
+          const double u = pixel_rng.Uniform(0.0, cam.width - 1.0);
+          o.uv_px = Eigen::Vector2d(u, v);
         } while ((o.uv_px - uv_true).norm() < kMinOutlierDistancePx);
       } else {
         o.uv_px = uv_true + noise_px * Eigen::Vector2d(nu, nv);

@@ -98,8 +98,10 @@ void DrawSmooth(CounterRng& rng, cv::Mat& t) {
   const int side = std::min(t.cols, t.rows);
   for (int i = 0; i < 6; ++i) {
     const cv::Point c = RandomTexel(rng, t);
-    cv::circle(t, c, side / 6 + static_cast<int>(rng.Below(static_cast<uint32_t>(side / 4 + 1))),
-               cv::Scalar(rng.Uniform(0.42, 0.58)), cv::FILLED, cv::LINE_AA);
+    // Grey drawn before radius: the order in which GCC evaluated these two as cv::circle's arguments.
+    const double grey = rng.Uniform(0.42, 0.58);
+    const int radius = side / 6 + static_cast<int>(rng.Below(static_cast<uint32_t>(side / 4 + 1)));
+    cv::circle(t, c, radius, cv::Scalar(grey), cv::FILLED, cv::LINE_AA);
   }
   cv::GaussianBlur(t, t, cv::Size(0, 0), std::max(2.0, side / 12.0));
   const int blobs = 1 + static_cast<int>(rng.Below(3));

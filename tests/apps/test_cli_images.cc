@@ -52,7 +52,8 @@ cv::Mat MakeTexture(double len_a, double len_b, uint64_t seed) {
   cv::RNG rng(seed);
   const int n = static_cast<int>(len_a * len_b * 12);
   for (int i = 0; i < n; ++i) {
-    const cv::Point c(rng.uniform(0, t.cols), rng.uniform(0, t.rows));
+    const int y = rng.uniform(0, t.rows);  // y before x: GCC's order for cv::Point(uniform(), uniform())
+    const cv::Point c(rng.uniform(0, t.cols), y);
     const int w = rng.uniform(6, 30), h = rng.uniform(6, 30);
     const cv::Scalar grey(rng.uniform(0, 256));
     if (rng.uniform(0, 3) == 0)

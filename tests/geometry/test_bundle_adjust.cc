@@ -7,6 +7,19 @@
 namespace mcslam::geometry {
 namespace {
 
+// Random draws in one statement each, last coordinate first: the order in which GCC evaluated the
+// Eigen::Vector3d(Normal(), Normal(), Normal()) these replace (argument order is unspecified in C++; clang
+// goes left to right), so that the data are the same with either compiler.
+Eigen::Vector3d NormalVector(CounterRng& rng, double sigma) {
+  const double z = sigma * rng.Normal(), y = sigma * rng.Normal(), x = sigma * rng.Normal();
+  return Eigen::Vector3d(x, y, z);
+}
+
+Eigen::Vector3d CloudPoint(CounterRng& rng) {
+  const double z = 3 + rng.Uniform(-0.3, 0.3), y = rng.Uniform(-0.4, 0.4), x = rng.Uniform(-0.5, 0.5);
+  return Eigen::Vector3d(x, y, z);
+}
+
 // Eight cameras on a 40 cm arc looking at a 1 m cloud 3 m away, exact observations.
 struct Scene {
   std::vector<Pose> cams;
@@ -14,7 +27,7 @@ struct Scene {
   std::vector<BundleObservation> obs;
   Scene() {
     CounterRng rng(1, 0);
-    for (int i = 0; i < 150; ++i) pts.emplace_back(rng.Uniform(-0.5, 0.5), rng.Uniform(-0.4, 0.4), 3 + rng.Uniform(-0.3, 0.3));
+    for (int i = 0; i < 150; ++i) pts.push_back(CloudPoint(rng));
     for (int c = 0; c < 8; ++c) {
       const Eigen::Vector3d centre(0.05 * c, 0.01 * c, 0.0);
       const Eigen::Quaterniond world_from_cam_q = QuaternionFromRotationVector(Eigen::Vector3d(0, -0.01 * c, 0));
@@ -43,10 +56,12 @@ TEST(BundleAdjust, RecoversPerturbedPosesAndPoints) {
   std::vector<Pose> cams = truth.cams;
   std::vector<Eigen::Vector3d> pts = truth.pts;
   CounterRng rng(2, 0);
-  for (size_t c = 2; c < cams.size(); ++c)
-    cams[c] = Pose(cams[c].q * QuaternionFromRotationVector(Eigen::Vector3d(0.005 * rng.Normal(), 0.005 * rng.Normal(), 0.005 * rng.Normal())),
-                   cams[c].t + Eigen::Vector3d(0.01 * rng.Normal(), 0.01 * rng.Normal(), 0.01 * rng.Normal()));
-  for (auto& p : pts) p += Eigen::Vector3d(0.02 * rng.Normal(), 0.02 * rng.Normal(), 0.02 * rng.Normal());
+  for (size_t c = 2; c < cams.size(); ++c) {
+    const Eigen::Vector3d dt = NormalVector(rng, 0.01);  // translation before rotation: GCC's order, as above
+    const Eigen::Vector3d dw = NormalVector(rng, 0.005);
+    cams[c] = Pose(cams[c].q * QuaternionFromRotationVector(dw), cams[c].t + dt);
+  }
+  for (auto& p : pts) p += NormalVector(rng, 0.02);
   const BundleAdjustSummary s = AdjustWithTheFirstTwoFixed(cams, pts, truth.obs);
   EXPECT_GT(s.initial_rms_px, 1.0);
   EXPECT_LT(s.final_rms_px, 1e-4);  // exact data: converges to zero residual (float-free double solve)
@@ -65,7 +80,7 @@ TEST(BundleAdjust, APointBehindACameraDoesNotStopTheAdjustment) {
   std::vector<Eigen::Vector3d> pts = truth.pts;
   CounterRng rng(4, 0);
   for (size_t c = 2; c < cams.size(); ++c)
-    cams[c] = Pose(cams[c].q, cams[c].t + Eigen::Vector3d(0.01 * rng.Normal(), 0.01 * rng.Normal(), 0.01 * rng.Normal()));
+    cams[c] = Pose(cams[c].q, cams[c].t + NormalVector(rng, 0.01));
   pts[7] = Eigen::Vector3d(0.1, 0.0, -1.0);  // behind every camera
   const BundleAdjustSummary s = AdjustWithTheFirstTwoFixed(cams, pts, truth.obs);
   EXPECT_EQ(s.left_out_behind, 8);  // point 7 in each of the 8 cameras
@@ -81,7 +96,10 @@ TEST(Pnp, RecoversAPoseWithOutliers) {
   for (const auto& o : sc.obs)
     if (o.camera == 5) uv.push_back(o.uv_norm);
   CounterRng rng(3, 0);
-  for (size_t i = 0; i < uv.size(); i += 5) uv[i] += Eigen::Vector2d(rng.Uniform(-0.1, 0.1), rng.Uniform(-0.1, 0.1));
+  for (size_t i = 0; i < uv.size(); i += 5) {
+    const double dv = rng.Uniform(-0.1, 0.1), du = rng.Uniform(-0.1, 0.1);  // v first: GCC's order, as above
+    uv[i] += Eigen::Vector2d(du, dv);
+  }
   int inliers = 0;
   const auto pose = SolvePnp(sc.pts, uv, {}, &inliers);
   ASSERT_TRUE(pose.has_value());

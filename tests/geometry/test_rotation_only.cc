@@ -33,10 +33,15 @@ Bearings MakeBearings(uint64_t seed, int n, double turn_deg, double noise_px, do
   std::uniform_real_distribution<double> u(-1, 1), depth(2, 6), unit(0, 1);
   std::normal_distribution<double> g(0, 1);
   Bearings b;
-  const Eigen::Vector3d axis = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+  // One draw a statement, last coordinate first, here and below: the order in which GCC evaluated the
+  // Eigen::Vector3d(g(rng), g(rng), g(rng)) these were (unspecified in C++; clang goes left to right), so
+  // that both compilers make the same bearings.
+  const double az = g(rng), ay = g(rng), ax = g(rng);
+  const Eigen::Vector3d axis = Eigen::Vector3d(ax, ay, az).normalized();
   b.cam_from_ref = Eigen::AngleAxisd(DegToRad(turn_deg), axis).toRotationMatrix();
   for (int k = 0; k < n; ++k) {
-    const Eigen::Vector3d x = Eigen::Vector3d(0.58 * u(rng), 0.58 * u(rng), 1.0).normalized() * depth(rng);
+    const double d = depth(rng), ry = 0.58 * u(rng), rx = 0.58 * u(rng);
+    const Eigen::Vector3d x = Eigen::Vector3d(rx, ry, 1.0).normalized() * d;
     b.ref.push_back(x.normalized());
     Eigen::Vector3d seen = b.cam_from_ref * (x - move);
     seen /= seen.z();
@@ -44,7 +49,12 @@ Bearings MakeBearings(uint64_t seed, int n, double turn_deg, double noise_px, do
     seen.y() += noise_px / kFocalPx * g(rng);
     const bool wrong = unit(rng) < outliers;
     b.outlier.push_back(wrong);
-    b.cam.push_back(wrong ? Eigen::Vector3d(u(rng), u(rng), 1.0 + unit(rng)).normalized() : seen.normalized());
+    if (wrong) {
+      const double wz = 1.0 + unit(rng), wy = u(rng), wx = u(rng);
+      b.cam.push_back(Eigen::Vector3d(wx, wy, wz).normalized());
+    } else {
+      b.cam.push_back(seen.normalized());
+    }
   }
   return b;
 }

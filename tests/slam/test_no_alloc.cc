@@ -29,7 +29,9 @@ TEST(PoseTrackerHotPath, TrackAllocatesNothingOnceWarm) {
   std::vector<PointObservation> obs;
   CounterRng rng(4, 0);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Vector3d p(rng.Uniform(-0.5, 0.5), rng.Uniform(-0.4, 0.4), 3 + rng.Uniform(-0.3, 0.3));
+    // z first: the order in which GCC evaluated p(Uniform(), Uniform(), 3 + Uniform()) (unspecified in C++).
+    const double z = 3 + rng.Uniform(-0.3, 0.3), y = rng.Uniform(-0.4, 0.4), x = rng.Uniform(-0.5, 0.5);
+    const Eigen::Vector3d p(x, y, z);
     Eigen::Vector2d uv;
     cam.ProjectWorld(Pose(), p, &uv);
     obs.push_back({p, uv, true});

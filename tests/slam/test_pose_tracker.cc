@@ -29,7 +29,12 @@ std::vector<PointObservation> ObservationsAt(const Pose& cam_from_world, const s
 std::vector<Eigen::Vector3d> Cloud() {
   std::vector<Eigen::Vector3d> pts;
   CounterRng rng(4, 0);
-  for (int i = 0; i < 150; ++i) pts.emplace_back(rng.Uniform(-0.5, 0.5), rng.Uniform(-0.4, 0.4), 3 + rng.Uniform(-0.3, 0.3));
+  for (int i = 0; i < 150; ++i) {
+    // One draw a statement, z first: the order in which GCC evaluated emplace_back(Uniform(), Uniform(),
+    // 3 + Uniform()) (unspecified in C++; clang goes left to right), so both compilers make the same cloud.
+    const double z = 3 + rng.Uniform(-0.3, 0.3), y = rng.Uniform(-0.4, 0.4), x = rng.Uniform(-0.5, 0.5);
+    pts.emplace_back(x, y, z);
+  }
   return pts;
 }
 
@@ -69,7 +74,10 @@ TEST(PoseTracker, LostWhenNothingToScoreOrNoInliers) {
   // Features that fit no pose near the previous one: every observation is far from its point's projection.
   auto obs = ObservationsAt(Pose(), Cloud());
   CounterRng rng(9, 0);
-  for (auto& o : obs) o.uv_undistorted_px = Eigen::Vector2d(rng.Uniform(0, 320), rng.Uniform(0, 240));
+  for (auto& o : obs) {
+    const double v = rng.Uniform(0, 240), u = rng.Uniform(0, 320);  // v first: GCC's order, as in Cloud()
+    o.uv_undistorted_px = Eigen::Vector2d(u, v);
+  }
   e = tracker->Track(Pose(), obs, 2, &res, &inl);
   EXPECT_FALSE(e.tracked);
   EXPECT_EQ(res.size(), obs.size());
@@ -88,7 +96,8 @@ TEST(PoseTracker, LostWhenMostScoringPointsDisagree) {
       ++exact;
       continue;
     }
-    obs[i].uv_undistorted_px = Eigen::Vector2d(rng.Uniform(0, 320), rng.Uniform(0, 240));
+    const double v = rng.Uniform(0, 240), u = rng.Uniform(0, 320);  // v first: GCC's order, as in Cloud()
+    obs[i].uv_undistorted_px = Eigen::Vector2d(u, v);
   }
   std::vector<double> res;
   std::vector<uint8_t> inl;

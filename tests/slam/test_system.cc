@@ -138,7 +138,12 @@ TEST(System, PlanarSceneInitialisesFromTheHomography) {
   in.groundtruth = sim::ToTrajectory(seq);
   CounterRng rng(5, 0);
   std::vector<Eigen::Vector3d> plane;
-  for (int i = 0; i < 300; ++i) plane.emplace_back(rng.Uniform(-0.6, 0.6), rng.Uniform(-0.6, 0.6), 0.3);
+  for (int i = 0; i < 300; ++i) {
+    // y first: the order in which GCC evaluated emplace_back(Uniform(), Uniform(), 0.3) (unspecified in C++;
+    // clang goes left to right), so both compilers make the same plane.
+    const double y = rng.Uniform(-0.6, 0.6), x = rng.Uniform(-0.6, 0.6);
+    plane.emplace_back(x, y, 0.3);
+  }
   for (size_t k = 0; k < seq.cam_from_world.size(); ++k) {
     FrameObservations f;
     f.index = static_cast<int64_t>(k);
@@ -414,7 +419,8 @@ TEST(System, RelocalisesAfterAJumpFromMatchesAlone) {
   CounterRng rng(5, 0);
   std::set<int64_t> wrong;
   for (size_t k = 0; k < m.size(); k += 3) {
-    m[k].uv_px = Eigen::Vector2d(rng.Uniform(0, 320), rng.Uniform(0, 240));
+    const double v = rng.Uniform(0, 240), u = rng.Uniform(0, 320);  // v first: GCC's order for Vector2d(U(), U())
+    m[k].uv_px = Eigen::Vector2d(u, v);
     wrong.insert(m[k].point_id);
   }
   const std::optional<Relocalisation> reloc = system.Relocalise(m);
