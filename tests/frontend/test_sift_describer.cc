@@ -43,12 +43,20 @@ TEST(SiftDescriber, DescribingTogetherGivesTheDescriptorsOfOneByOne) {
   std::vector<cv::Point2f> clustered;
   for (int w = 0; w < 40; ++w) {
     const float cx = rng.uniform(20.f, 620.f), cy = rng.uniform(20.f, 460.f);
-    for (int k = 0; k < 5; ++k) clustered.emplace_back(cx + rng.uniform(-15.f, 15.f), cy + rng.uniform(-15.f, 15.f));
+    for (int k = 0; k < 5; ++k) {
+      // y drawn before x, here and below: the order in which GCC evaluated emplace_back(x + uniform(),
+      // y + uniform()) (argument order is unspecified in C++; clang goes left to right).
+      const float y = cy + rng.uniform(-15.f, 15.f), x = cx + rng.uniform(-15.f, 15.f);
+      clustered.emplace_back(x, y);
+    }
   }
   ExpectSameAsOneByOne(d, gray, clustered, "clustered");
   // Spread: 300 points anywhere, most in tiles of their own or a few.
   std::vector<cv::Point2f> spread;
-  for (int k = 0; k < 300; ++k) spread.emplace_back(rng.uniform(0.f, 639.f), rng.uniform(0.f, 479.f));
+  for (int k = 0; k < 300; ++k) {
+    const float y = rng.uniform(0.f, 479.f), x = rng.uniform(0.f, 639.f);
+    spread.emplace_back(x, y);
+  }
   ExpectSameAsOneByOne(d, gray, spread, "spread");
   // At the borders and corners (patches cut by the image) with an inner neighbour in the same tile, and
   // points outside the image (no descriptor, or one from what of the patch is inside: as one by one).
