@@ -9,9 +9,10 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-matplotlib python3-numpy
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev libomp-14-dev
 )
-# clang and its runtime libraries (libFuzzer, the sanitizers) build the fuzz targets (scripts/fuzz.sh).
+# clang and its runtime libraries (libFuzzer, the sanitizers) build the fuzz targets (scripts/fuzz.sh) and the
+# sanitized tests (make test-sanitize), which also need clang's OpenMP runtime (libomp-14-dev).
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -180,9 +180,9 @@ void RunFullSlam(const RunArgs& a) {
   line += RunTimesFields(res.times);
   WriteReportJson((out / "report.json").string(), j);
   fmt::print("{}\n", line);
-  if (Interrupted()) throw std::runtime_error(InterruptedMessage());
+  if (Interrupted()) throw InterruptedError();
   if (!res.initialised)
-    throw std::runtime_error(fmt::format(
+    throw ExitError(kExitNotInitialised, fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
         "move by a median of {} deg with enough parallax between two frames",
         res.reports.size(), a.out, options.init.min_median_motion_deg));
@@ -267,7 +267,7 @@ void Run(const RunArgs& a) {
   line += RunTimesFields(times);
   WriteReportJson((std::filesystem::path(a.out) / "report.json").string(), j);
   fmt::print("{}\n", line);
-  if (Interrupted()) throw std::runtime_error(InterruptedMessage());
+  if (Interrupted()) throw InterruptedError();
 }
 
 }  // namespace

@@ -1010,9 +1010,9 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::fflush(stdout);
 
   if (!failure.empty()) throw std::runtime_error(fmt::format("{} (outputs so far written to {})", failure, out_dir));
-  if (interrupted) throw std::runtime_error(InterruptedMessage());
+  if (interrupted) throw InterruptedError();
   if (!sum.initialised)
-    throw std::runtime_error(fmt::format(
+    throw ExitError(kExitNotInitialised, fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "
         "median of {:.2f} deg with a median parallax of {:.1f} deg between two frames (last: {})",
         frames_processed, out_dir, sys_opts.init.min_median_motion_deg, sys_opts.init.min_median_parallax_deg,

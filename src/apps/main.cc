@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/commands.h"
+#include "apps/options.h"
 
 int main(int argc, char** argv) {
   // Logs and warnings on stderr; stdout carries only the results (a run's summary line, eval's figures), so
@@ -26,6 +27,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const mcslam::apps::ExitError& e) {
+    std::fprintf(stderr, "mcslam: %s%s\n", e.code() >= 128 ? "" : "error: ", e.what());
+    return e.code();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mcslam: error: %s\n", e.what());
     return 1;

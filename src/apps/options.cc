@@ -177,6 +177,7 @@ void InstallInterruptHandler() {
   std::signal(SIGTERM, OnStopSignal);
 }
 bool Interrupted() { return g_signal.load() != 0; }
+ExitError InterruptedError() { return ExitError(128 + g_signal.load(), InterruptedMessage()); }
 std::string InterruptedMessage() {
   const int sig = g_signal.load();
   return fmt::format("interrupted by {} (outputs written)", sig == SIGTERM ? "SIGTERM" : sig == SIGINT ? "Ctrl-C (SIGINT)"

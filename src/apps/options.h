@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -48,5 +49,28 @@ std::optional<uint64_t> AvailableMemoryBytes();
 void InstallInterruptHandler();
 bool Interrupted();
 std::string InterruptedMessage();  // "interrupted by SIGTERM (outputs written)", ...
+
+// Exit statuses (docs/hostile_input.md lists them), so that a script can tell a bad input from a run that could
+// not start from its sequence, and from one that was stopped:
+//   0    done
+//   1    bad input, flags or files, or an error while running: the message on stderr names what
+//   3    the run went through its sequence but never initialised (too little motion); its outputs are written
+//   128+signal  stopped by SIGINT (130) or SIGTERM (143); the outputs computed so far are written
+//   100-114     the command line could not be parsed (CLI11's codes, e.g. 105 a value out of range, 109 extras)
+inline constexpr int kExitError = 1;
+inline constexpr int kExitNotInitialised = 3;
+
+// Thrown where a job ends with a status other than kExitError; main prints what() and exits with code().
+class ExitError : public std::runtime_error {
+ public:
+  ExitError(int code, const std::string& message) : std::runtime_error(message), code_(code) {}
+  int code() const { return code_; }
+
+ private:
+  int code_;
+};
+
+// The status and message of a stop by a signal, to throw once the outputs are written.
+ExitError InterruptedError();
 
 }  // namespace mcslam::apps
