@@ -27,10 +27,10 @@
 #include "apps/slam_job.h"
 #include "core/median.h"
 #include "eval/trajectory_eval.h"
-#include "frontend/to_observations.h"
 #include "io/datasets.h"
 #include "io/ply.h"
 #include "io/trajectory_io.h"
+#include "pipeline/visual_slam.h"
 
 namespace mcslam::apps {
 
@@ -42,17 +42,6 @@ using Clock = std::chrono::steady_clock;
 
 double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
-// Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
-// of the corners in its window, and a point lost long ago is rarely found again.
-constexpr size_t kMaxRemapRequests = 200;
-// Relocalisation compares each new track with this many lost map points at most, the most recently seen:
-// the cost of a try stays bounded however long the run (at 400 tracks, ~25 ms here).
-constexpr size_t kMaxRelocalisationPoints = 2000;
-// Relocalisation's descriptor distance cap (remapping's is FrontendOptions::remap_max_distance, 250). A lost
-// frame is usually a view from elsewhere than where the points were last described, and the RANSAC PnP that
-// follows verifies every match: Lowe's test alone (with a cap that only stops the nearest of unrelated points,
-// whose median distance is ~520 here) keeps the matches that a changed view pushed past 250.
-constexpr double kRelocalisationMaxDistance = 400.0;
 
 bool AllDigits(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
@@ -343,64 +332,6 @@ void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
 }
 
-// Relocalisation: the features of this frame that are no map point (tracks born since the loss) matched by
-// their descriptors to the map points whose tracks ended (nearest, Lowe's ratio and the remapping's distance
-// cap; one feature for a map point, the closest), together with the map points still tracked, then the
-// System's RANSAC PnP. `relabel` pairs a matched track with its map point.
-struct RelocResult : slam::Relocalisation {
-  std::vector<std::pair<int64_t, int64_t>> relabel;  // track id, map point id
-};
-std::optional<RelocResult> Relocalise(frontend::Frontend& fe, const frontend::FrameResult& fr,
-                                      const slam::System& system,
-                                      const std::unordered_map<int64_t, frontend::Descriptor>& lost_descriptors,
-                                      int* num_matches) {
-  std::vector<std::tuple<int64_t, int64_t, const frontend::Descriptor*>> recent;  // last seen, id, look
-  for (const auto& [id, d] : lost_descriptors)
-    if (const slam::MapPoint* p = system.map().Find(id); p && p->state != slam::PointState::kRemoved)
-      recent.emplace_back(p->last_seen_frame, id, &d);
-  std::sort(recent.begin(), recent.end(), [](const auto& a, const auto& b) {
-    return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) < std::get<1>(b);
-  });
-  if (recent.size() > kMaxRelocalisationPoints) recent.resize(kMaxRelocalisationPoints);
-  std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
-  for (const auto& [seen, id, d] : recent) map_side.emplace_back(id, d);
-  std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<const frontend::Descriptor*> looks;
-  for (const auto& [id, d] : map_side) looks.push_back(d);
-  frontend::FrontendOptions match_options = fe.options();
-  match_options.remap_max_distance = kRelocalisationMaxDistance;
-  struct Match {
-    float distance;
-    int64_t track;
-    Eigen::Vector2d uv;
-  };
-  std::map<int64_t, Match> best_for_point;  // ordered: the same matches in the same order every run
-  std::vector<slam::RelocalisationMatch> matches;
-  for (const frontend::TrackedFeature& f : fr.features) {
-    if (const slam::MapPoint* p = system.map().Find(f.feature_id); p && p->state != slam::PointState::kRemoved) {
-      matches.push_back({f.feature_id, f.uv_px});
-      continue;
-    }
-    if (map_side.size() < 2) continue;
-    const std::optional<frontend::Descriptor> d = fe.GetDescriptor(f.feature_id);
-    if (!d) continue;
-    const std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, match_options);
-    if (!m) continue;
-    const auto [it, fresh] = best_for_point.try_emplace(map_side[m->index].first, Match{m->distance, f.feature_id, f.uv_px});
-    if (!fresh && m->distance < it->second.distance) it->second = {m->distance, f.feature_id, f.uv_px};
-  }
-  RelocResult out;
-  for (const auto& [point_id, m] : best_for_point) {
-    matches.push_back({point_id, m.uv});
-    out.relabel.emplace_back(m.track, point_id);
-  }
-  *num_matches = static_cast<int>(matches.size());
-  const std::optional<slam::Relocalisation> r = system.Relocalise(matches);
-  if (!r) return std::nullopt;
-  static_cast<slam::Relocalisation&>(out) = *r;
-  return out;
-}
-
 }  // namespace
 
 // ---- options ---------------------------------------------------------------------------------------------
@@ -561,13 +492,17 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   std::unique_ptr<Overlay> overlay;
   if (!options.overlay_path.empty()) overlay = std::make_unique<Overlay>(options.overlay_path, camera, video_fps);
 
-  frontend::FrontendOptions fe_opts = options.frontend;
-  fe_opts.describe_async = true;  // SIFT of the new tracks runs while the back end estimates the pose
-  frontend::Frontend fe(fe_opts);
-  slam::System system(camera, sys_opts, std::move(pose_kernel), std::move(point_kernel));
+  pipeline::VisualSlamOptions vs_opts;
+  vs_opts.frontend = options.frontend;
+  vs_opts.frontend.describe_async = true;  // SIFT of the new tracks runs while the back end estimates the pose
+  vs_opts.system = sys_opts;
+  vs_opts.relocalise = options.relocalise;
+  const frontend::FrontendOptions& fe_opts = vs_opts.frontend;
+  pipeline::VisualSlam slam(camera, vs_opts, std::move(pose_kernel), std::move(point_kernel));
+  const slam::System& system = slam.system();
   if (options.gt_scale) {
     if (!gt) throw std::invalid_argument("--gt-scale needs a ground truth: the dataset has none and no --gt was given");
-    system.SetBaselineOracle(BaselineOracle(*gt));
+    slam.system().SetBaselineOracle(BaselineOracle(*gt));
   }
 
   const int64_t last = options.end >= 0 ? options.end : (count ? *count - 1 : -1);
@@ -585,14 +520,11 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
   ReportLog log;
   std::vector<slam::FrameReport>& reports = log.reports;
   const std::map<int64_t, size_t>& report_of_index = log.index_of_frame;
-  std::unordered_map<int64_t, frontend::Descriptor> lost_descriptors;  // map points whose track ended
-  std::optional<Pose> latest_cam_from_world;
   std::optional<int64_t> init_frame;
   std::string init_note, failure;
   nlohmann::json init_rejections = nlohmann::json::array();  // initialisations found and refused, and why
   int tracked = 0, lost = 0;
-  bool was_lost = false;
-  bool skipped_since_processed = false;  // frames were skipped since the last one processed
+  bool was_lost = false;  // for the log: the last frame was lost
   int64_t frames_processed = 0, frames_read = 0;
   int64_t frames_decoded = 0;  // frames the source gave, from its first (before --start included)
   bool source_ended = false;   // the source ran out (not --end, an interrupt or a failure)
@@ -603,7 +535,6 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
 
   try {
     io::Frame frame;
-    std::vector<frontend::RemapRequest> requests;
     while (!Interrupted()) {
       const auto t_frame = Clock::now();
       if (!data.source->Next(&frame)) {
@@ -628,88 +559,43 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, frame.error);
         row.skipped = true;
-        skipped_since_processed = true;
+        slam.SkipFrame();
         row.error = frame.error;
         row.frame_ms = MsSince(t_frame);
         rows.push_back(std::move(row));
         continue;
       }
 
-      // Lost map points projected with the latest pose: the front end looks for them near there (§6.4).
-      requests.clear();
-      if (system.initialised() && latest_cam_from_world) {
-        std::vector<std::pair<int64_t, const slam::MapPoint*>> lost_points;
-        for (const slam::MapPoint& p : system.map().points())
-          if (p.state == slam::PointState::kLost && lost_descriptors.count(p.id))
-            lost_points.emplace_back(p.last_seen_frame, &p);
-        std::sort(lost_points.begin(), lost_points.end(),
-                  [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second->id < b.second->id); });
-        for (const auto& [seen, p] : lost_points) {
-          if (requests.size() >= kMaxRemapRequests) break;
-          Eigen::Vector2d uv;
-          if (!camera.ProjectWorld(*latest_cam_from_world, p->position_in_world, &uv) ||
-              !camera.InImage(uv, fe_opts.border_px))
-            continue;
-          requests.push_back({p->id, lost_descriptors.at(p->id), uv});
-        }
-      }
-      frontend::FrameResult fr;
+      pipeline::VisualSlamStep step;
       try {
-        fr = fe.Process(frame.image, frame.index, frame.stamp_s, requests);
-      } catch (const std::invalid_argument& e) {  // a pixel type the front end does not take: this frame only
+        step = slam.Process(frame.image, frame.index, frame.stamp_s);
+      } catch (const pipeline::UnusableFrame& e) {  // a pixel type the front end does not take: this frame only
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, e.what());
         row.skipped = true;
-        skipped_since_processed = true;
         row.error = e.what();
         row.frame_ms = MsSince(t_frame);
         rows.push_back(std::move(row));
         continue;
       }
-      for (const frontend::LostTrack& t : fr.lost) {
-        const slam::MapPoint* p = system.map().Find(t.feature_id);
-        if (t.descriptor && p && p->state != slam::PointState::kRemoved) lost_descriptors[t.feature_id] = *t.descriptor;
-      }
-      for (int64_t id : fr.remapped_ids) lost_descriptors.erase(id);
+      const frontend::FrameResult& fr = step.frontend;
       row.fe = fr.stats;
       row.features = static_cast<int>(fr.features.size());
       row.lost_tracks = static_cast<int>(fr.lost.size());
-
-      row.before_init = !system.initialised();
-      slam::FrameObservations obs = frontend::ToObservations(fr);
-      // After a lost frame, and after unreadable frames (the camera may have moved far meanwhile).
-      if (options.relocalise && (was_lost || skipped_since_processed) && system.initialised()) {
-        const auto t_reloc = Clock::now();
-        row.reloc_tried = true;
-        // Map points that left the map need no descriptor any more.
-        std::erase_if(lost_descriptors, [&](const auto& kv) {
-          const slam::MapPoint* p = system.map().Find(kv.first);
-          return !p || p->state == slam::PointState::kRemoved;
-        });
-        if (const auto reloc = Relocalise(fe, fr, system, lost_descriptors, &row.reloc_matches)) {
-          row.reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
-          // The inlier features go on under their map points' ids, in this frame's observations too.
-          const std::unordered_set<int64_t> inliers(reloc->inlier_point_ids.begin(), reloc->inlier_point_ids.end());
-          for (const auto& [track_id, point_id] : reloc->relabel) {
-            if (!inliers.count(point_id) || !fe.Relabel(track_id, point_id, lost_descriptors.at(point_id))) continue;
-            for (slam::FeatureObservation& f : obs.features)
-              if (f.feature_id == track_id) f.feature_id = point_id;
-            lost_descriptors.erase(point_id);
-          }
-          obs.pose_hint = reloc->cam_from_world;
-          progress.Clear();
-          spdlog::info("frame {}: relocalised from {} of {} features matched to the map", frame.index,
-                       row.reloc_inliers, row.reloc_matches);
-        }
-        row.reloc_ms = MsSince(t_reloc);
+      row.before_init = step.before_init;
+      row.reloc_tried = step.reloc_tried;
+      row.reloc_matches = step.reloc_matches;
+      row.reloc_inliers = step.reloc_inliers;
+      row.reloc_ms = step.reloc_ms;
+      row.backend_ms = step.backend_ms;
+      if (step.reloc_inliers > 0) {
+        progress.Clear();
+        spdlog::info("frame {}: relocalised from {} of {} features matched to the map", frame.index, row.reloc_inliers,
+                     row.reloc_matches);
       }
-      skipped_since_processed = false;
-      const auto t_backend = Clock::now();
-      const std::vector<slam::FrameReport> out_reports = system.Process(obs);
-      row.backend_ms = MsSince(t_backend);
       ++frames_processed;
       const slam::FrameReport* current = nullptr;
-      for (const slam::FrameReport& r : out_reports) {
+      for (const slam::FrameReport& r : step.reports) {
         if (const std::optional<slam::FrameStatus> replaced = log.Put(r)) {
           tracked -= *replaced == slam::FrameStatus::kTracked;
           lost -= *replaced == slam::FrameStatus::kLost;
@@ -725,7 +611,6 @@ ImageJobSummary RunImageJob(const std::string& input, const std::string& out_dir
         }
       }
       if (auto it = report_of_index.find(frame.index); it != report_of_index.end()) current = &reports[it->second];
-      if (current && current->has_pose) latest_cam_from_world = current->cam_from_world;
       if (current) {
         const bool is_lost = current->status == slam::FrameStatus::kLost;
         if (is_lost && !was_lost) progress.Clear(), spdlog::warn("frame {} lost: {}", current->index, current->note);

@@ -15,11 +15,11 @@ namespace mcslam::apps {
 
 namespace fs = std::filesystem;
 
-std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames) {
-  std::vector<slam::FrameObservations> out;
+std::vector<FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames) {
+  std::vector<FrameObservations> out;
   out.reserve(frames.size());
   for (const io::ObservationFrame& f : frames) {
-    slam::FrameObservations s;
+    FrameObservations s;
     s.index = f.index;
     s.stamp_s = f.stamp_s;
     s.features.reserve(f.observations.size());

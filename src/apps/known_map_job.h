@@ -16,7 +16,7 @@ namespace mcslam::apps {
 // A folder of observations as `mcslam synth` writes it (or any front end could).
 struct SequenceInput {
   PinholeCamera camera;
-  std::vector<slam::FrameObservations> frames;
+  std::vector<FrameObservations> frames;
   io::Trajectory groundtruth;  // world_from_cam; empty when the folder has none
 };
 // Reads DIR/camera.yaml, DIR/observations.txt and (when present) DIR/groundtruth.txt. Throws naming the
@@ -30,7 +30,7 @@ struct KnownMapInput : SequenceInput {
 // LoadSequenceInput plus DIR/map_gt.ply (with point ids).
 KnownMapInput LoadKnownMapInput(const std::string& dir);
 KnownMapInput KnownMapInputFromSequence(const sim::SyntheticSequence& sequence);
-std::vector<slam::FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames);
+std::vector<FrameObservations> ToSlamFrames(const std::vector<io::ObservationFrame>& frames);
 
 // Tracks every frame; the first frame's pose comes from the ground truth (nearest stamp within 1 ms).
 // `on_frame` (optional) sees each result as it is made. Stops early, keeping what it has, when

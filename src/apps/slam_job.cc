@@ -22,7 +22,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   SlamRunResult res;
   ReportLog log;
   const RunClock clock;
-  for (const slam::FrameObservations& f : input.frames) {
+  for (const FrameObservations& f : input.frames) {
     if (stop && stop()) break;
     for (const slam::FrameReport& r : system.Process(f)) {
       log.Put(r);

@@ -1,13 +1,12 @@
 #pragma once
-// The front end's per-frame result as the back end's input. Header only: slam/types.h is plain data
-// (Eigen and core's Pose only), so the front end library does not link the back end.
+// The front end's per-frame result as the back end's input (core/observations.h, the seam both layers use).
+#include "core/observations.h"
 #include "frontend/frontend.h"
-#include "slam/types.h"
 
 namespace mcslam::frontend {
 
-inline slam::FrameObservations ToObservations(const FrameResult& result) {
-  slam::FrameObservations out;
+inline FrameObservations ToObservations(const FrameResult& result) {
+  FrameObservations out;
   out.index = result.index;
   out.stamp_s = result.stamp_s;
   out.features.reserve(result.features.size());

@@ -9,7 +9,7 @@
 #include "core/camera.h"
 #include "slam/pose_smoother.h"
 #include "slam/pose_tracker.h"
-#include "slam/types.h"
+#include "core/observations.h"
 
 namespace mcslam::slam {
 

@@ -20,7 +20,7 @@
 #include "slam/map.h"
 #include "slam/pose_smoother.h"
 #include "slam/pose_tracker.h"
-#include "slam/types.h"
+#include "core/observations.h"
 
 namespace mcslam::slam {
 

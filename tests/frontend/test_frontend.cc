@@ -575,7 +575,7 @@ TEST(Frontend, ConvertsToTheBackEndsObservations) {
   const MovingTexture tex(kSize, 12);
   Frontend fe;
   const FrameResult r = fe.Process(tex.Frame(0, 0), 7, 1.25);
-  const slam::FrameObservations obs = ToObservations(r);
+  const FrameObservations obs = ToObservations(r);
   EXPECT_EQ(obs.index, 7);
   EXPECT_EQ(obs.stamp_s, 1.25);
   ASSERT_EQ(obs.features.size(), r.features.size());

@@ -1,5 +1,6 @@
-// CPU backend of the point kernel (Algorithm 2): points spread over the cores (oneTBB), the samples of one
-// point vectorised across SIMD lanes, each observation's keyframe pose and feature broadcast.
+// CPU backend of the point kernel (Algorithm 2; a sample scored by Eq. 10, its reprojection distances summed over
+// the keyframes): points spread over the cores (oneTBB), the samples of one point vectorised across SIMD lanes,
+// each observation's keyframe pose and feature broadcast.
 #include <algorithm>
 #include <limits>
 

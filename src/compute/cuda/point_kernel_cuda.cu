@@ -1,6 +1,6 @@
 // CUDA backend of the point kernel (paper §6.3, Algorithm 2): one block per point, its threads over the
 // samples; sample i made by the same PerturbPointT as the CPU backend from row i of the normal table and
-// scored by the same ReprojectionDistanceT over the point's observations; the point's best sample by a
+// scored by the same ReprojectionDistanceT summed over the point's observations (Eq. 10); the point's best sample by a
 // block reduction (ties to the lowest index). Only one (score, index) per point comes back; the host makes
 // the winning position from its row, as the CPU backend does.
 //

@@ -1,6 +1,7 @@
 #pragma once
-// What the back end consumes: per frame, the tracked features (feature id -> pixel). The back end knows
-// nothing of images (../shared/DESIGN.md, the seam between front end and back end).
+// The seam between front end and back end: per frame, the tracked features (feature id -> pixel). The front
+// end produces it, the back end (slam) consumes it and knows nothing of images; both depend on core only, so
+// neither includes the other (docs/design.md).
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -9,7 +10,7 @@
 
 #include "core/pose.h"
 
-namespace mcslam::slam {
+namespace mcslam {
 
 struct FeatureObservation {
   int64_t feature_id = 0;
@@ -25,4 +26,4 @@ struct FrameObservations {
   std::optional<Pose> pose_hint;
 };
 
-}  // namespace mcslam::slam
+}  // namespace mcslam

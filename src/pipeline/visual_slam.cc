@@ -1,0 +1,170 @@
+#include "pipeline/visual_slam.h"
+
+#include <algorithm>
+#include <chrono>
+#include <map>
+#include <stdexcept>
+#include <tuple>
+#include <unordered_set>
+#include <utility>
+
+#include <fmt/format.h>
+
+#include "frontend/to_observations.h"
+
+namespace mcslam::pipeline {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+bool Removed(const slam::MapPoint* p) { return !p || p->state == slam::PointState::kRemoved; }
+
+}  // namespace
+
+void VisualSlamOptions::Check() const {
+  system.Check();
+  if (max_remap_requests < 0)
+    throw std::invalid_argument(fmt::format("max_remap_requests must be >= 0, got {}", max_remap_requests));
+  if (max_relocalisation_points < 0)
+    throw std::invalid_argument(
+        fmt::format("max_relocalisation_points must be >= 0, got {}", max_relocalisation_points));
+  if (!(relocalisation_max_distance > 0))
+    throw std::invalid_argument(
+        fmt::format("relocalisation_max_distance must be > 0, got {}", relocalisation_max_distance));
+}
+
+const slam::FrameReport* VisualSlamStep::current() const {
+  for (auto it = reports.rbegin(); it != reports.rend(); ++it)
+    if (it->index == frontend.index) return &*it;
+  return nullptr;
+}
+
+VisualSlam::VisualSlam(const PinholeCamera& camera, VisualSlamOptions options,
+                       std::unique_ptr<compute::PoseKernel> pose_kernel,
+                       std::unique_ptr<compute::PointKernel> point_kernel)
+    : camera_(camera),
+      options_((options.Check(), std::move(options))),
+      frontend_(options_.frontend),
+      system_(camera, options_.system, std::move(pose_kernel), std::move(point_kernel)) {}
+
+// Lost map points projected with the latest pose, the most recently seen first: the front end looks for them
+// near there (§6.4).
+std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
+  std::vector<frontend::RemapRequest> requests;
+  if (!system_.initialised() || !latest_cam_from_world_) return requests;
+  std::vector<std::pair<int64_t, const slam::MapPoint*>> lost_points;
+  for (const slam::MapPoint& p : system_.map().points())
+    if (p.state == slam::PointState::kLost && lost_descriptors_.count(p.id)) lost_points.emplace_back(p.last_seen_frame, &p);
+  std::sort(lost_points.begin(), lost_points.end(), [](const auto& a, const auto& b) {
+    return a.first > b.first || (a.first == b.first && a.second->id < b.second->id);
+  });
+  for (const auto& [seen, p] : lost_points) {
+    if (requests.size() >= static_cast<size_t>(options_.max_remap_requests)) break;
+    Eigen::Vector2d uv;
+    if (!camera_.ProjectWorld(*latest_cam_from_world_, p->position_in_world, &uv) ||
+        !camera_.InImage(uv, options_.frontend.border_px))
+      continue;
+    requests.push_back({p->id, lost_descriptors_.at(p->id), uv});
+  }
+  return requests;
+}
+
+VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double stamp_s) {
+  VisualSlamStep step;
+  const std::vector<frontend::RemapRequest> requests = RemapRequests();
+  try {
+    step.frontend = frontend_.Process(image, index, stamp_s, requests);
+  } catch (const std::invalid_argument& e) {  // a pixel type the front end does not take: this frame only
+    after_gap_ = true;
+    throw UnusableFrame(e.what());
+  }
+  const frontend::FrameResult& fr = step.frontend;
+  for (const frontend::LostTrack& t : fr.lost)
+    if (t.descriptor && !Removed(system_.map().Find(t.feature_id))) lost_descriptors_[t.feature_id] = *t.descriptor;
+  for (int64_t id : fr.remapped_ids) lost_descriptors_.erase(id);
+
+  step.before_init = !system_.initialised();
+  FrameObservations obs = frontend::ToObservations(fr);
+  if (options_.relocalise && (was_lost_ || after_gap_) && system_.initialised()) {
+    const auto t_reloc = Clock::now();
+    Relocalise(fr, &obs, &step);
+    step.reloc_ms = MsSince(t_reloc);
+  }
+  after_gap_ = false;
+  const auto t_backend = Clock::now();
+  step.reports = system_.Process(obs);
+  step.backend_ms = MsSince(t_backend);
+  if (const slam::FrameReport* current = step.current()) {
+    if (current->has_pose) latest_cam_from_world_ = current->cam_from_world;
+    was_lost_ = current->status == slam::FrameStatus::kLost;
+  }
+  return step;
+}
+
+// The features of this frame that are no map point (tracks born since the loss) matched by their descriptors
+// to the map points whose tracks ended (nearest, Lowe's ratio and a distance cap; one feature for a map point,
+// the closest), together with the map points still tracked, then the System's RANSAC PnP. The matched tracks
+// that agree with the pose go on under their map points' ids, in this frame's observations too.
+void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step) {
+  step->reloc_tried = true;
+  // Map points that left the map need no descriptor any more.
+  std::erase_if(lost_descriptors_, [&](const auto& kv) { return Removed(system_.map().Find(kv.first)); });
+
+  std::vector<std::tuple<int64_t, int64_t, const frontend::Descriptor*>> recent;  // last seen, id, look
+  for (const auto& [id, d] : lost_descriptors_)
+    if (const slam::MapPoint* p = system_.map().Find(id); !Removed(p)) recent.emplace_back(p->last_seen_frame, id, &d);
+  std::sort(recent.begin(), recent.end(), [](const auto& a, const auto& b) {
+    return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) < std::get<1>(b);
+  });
+  if (recent.size() > static_cast<size_t>(options_.max_relocalisation_points))
+    recent.resize(options_.max_relocalisation_points);
+  std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
+  for (const auto& [seen, id, d] : recent) map_side.emplace_back(id, d);
+  std::sort(map_side.begin(), map_side.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<const frontend::Descriptor*> looks;
+  for (const auto& [id, d] : map_side) looks.push_back(d);
+  frontend::FrontendOptions match_options = frontend_.options();
+  match_options.remap_max_distance = options_.relocalisation_max_distance;
+  struct Match {
+    float distance;
+    int64_t track;
+    Eigen::Vector2d uv;
+  };
+  std::map<int64_t, Match> best_for_point;  // ordered: the same matches in the same order every run
+  std::vector<slam::RelocalisationMatch> matches;
+  for (const frontend::TrackedFeature& f : fr.features) {
+    if (!Removed(system_.map().Find(f.feature_id))) {
+      matches.push_back({f.feature_id, f.uv_px});
+      continue;
+    }
+    if (map_side.size() < 2) continue;
+    const std::optional<frontend::Descriptor> d = frontend_.GetDescriptor(f.feature_id);
+    if (!d) continue;
+    const std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, match_options);
+    if (!m) continue;
+    const auto [it, fresh] =
+        best_for_point.try_emplace(map_side[m->index].first, Match{m->distance, f.feature_id, f.uv_px});
+    if (!fresh && m->distance < it->second.distance) it->second = {m->distance, f.feature_id, f.uv_px};
+  }
+  std::vector<std::pair<int64_t, int64_t>> relabel;  // track id, map point id
+  for (const auto& [point_id, m] : best_for_point) {
+    matches.push_back({point_id, m.uv});
+    relabel.emplace_back(m.track, point_id);
+  }
+  step->reloc_matches = static_cast<int>(matches.size());
+  const std::optional<slam::Relocalisation> reloc = system_.Relocalise(matches);
+  if (!reloc) return;
+  step->reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
+  const std::unordered_set<int64_t> inliers(reloc->inlier_point_ids.begin(), reloc->inlier_point_ids.end());
+  for (const auto& [track_id, point_id] : relabel) {
+    if (!inliers.count(point_id) || !frontend_.Relabel(track_id, point_id, lost_descriptors_.at(point_id))) continue;
+    for (FeatureObservation& f : obs->features)
+      if (f.feature_id == track_id) f.feature_id = point_id;
+    lost_descriptors_.erase(point_id);
+  }
+  obs->pose_hint = reloc->cam_from_world;
+}
+
+}  // namespace mcslam::pipeline

@@ -1,0 +1,101 @@
+#pragma once
+// The only layer that sees pixels and 3D together (docs/design.md): a VisualSlam owns a front end and a System
+// and runs one frame through both. Around the paper's per-frame loop it keeps what joins them:
+// - remapping (§6.4): the lost map points, projected with the latest pose, are handed to the front end, which
+//   looks for them near there by their SIFT descriptors (kept here from the moment their track ended);
+// - relocalisation: after a lost frame, or after frames that could not be read, the frame's features are
+//   matched by descriptor to the map points whose tracks ended, the System's RANSAC PnP places the frame, the
+//   matched tracks go on under their map points' ids, and the Monte Carlo pose step starts from that pose.
+// The application around it reads frames, writes files and reports progress; it does no SLAM.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <unordered_map>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "compute/point_kernel.h"
+#include "compute/pose_kernel.h"
+#include "core/camera.h"
+#include "core/pose.h"
+#include "frontend/frontend.h"
+#include "slam/system.h"
+
+namespace mcslam::pipeline {
+
+struct VisualSlamOptions {
+  frontend::FrontendOptions frontend;
+  slam::SystemOptions system;
+  // After a lost frame (or unreadable ones), relocalise against the map before the pose step.
+  bool relocalise = true;
+  // Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
+  // of the corners in its window, and a point lost long ago is rarely found again.
+  int max_remap_requests = 200;
+  // Relocalisation compares each new track with this many lost map points at most, the most recently seen:
+  // the cost of a try stays bounded however long the run (at 400 tracks, ~25 ms on 2 cores).
+  int max_relocalisation_points = 2000;
+  // Relocalisation's descriptor distance cap (remapping's is FrontendOptions::remap_max_distance, 250). A lost
+  // frame is usually a view from elsewhere than where the points were last described, and the RANSAC PnP that
+  // follows verifies every match: Lowe's test alone (with a cap that only stops the nearest of unrelated
+  // points, whose median distance is ~520 on the shared sequences) keeps the matches a changed view pushed
+  // past 250.
+  double relocalisation_max_distance = 400.0;
+  // Throws std::invalid_argument naming the field.
+  void Check() const;
+};
+
+// The front end does not take this image (its pixel type): the frame is skipped, the run goes on.
+class UnusableFrame : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// What one frame did, for the application's per-frame report.
+struct VisualSlamStep {
+  frontend::FrameResult frontend;           // tracks, lost tracks, front-end counts and times
+  std::vector<slam::FrameReport> reports;   // System::Process's reports (this frame, and earlier ones revised)
+  bool before_init = false;                 // the map did not exist when the frame came
+  double backend_ms = 0;                    // System::Process
+  // Relocalisation: tried on this frame, features matched to map points, PnP inliers (0: no pose), time.
+  bool reloc_tried = false;
+  int reloc_matches = 0;
+  int reloc_inliers = 0;
+  double reloc_ms = 0;
+  // The report of this frame among `reports` (nullptr when the System gave none for it).
+  const slam::FrameReport* current() const;
+};
+
+class VisualSlam {
+ public:
+  VisualSlam(const PinholeCamera& camera, VisualSlamOptions options, std::unique_ptr<compute::PoseKernel> pose_kernel,
+             std::unique_ptr<compute::PointKernel> point_kernel);
+
+  // Runs one readable frame through the front end and the back end. Throws UnusableFrame when the front end
+  // does not take the image's pixel type: nothing has changed then but that the next frame counts as coming
+  // after a gap. Other exceptions (the System's) propagate.
+  VisualSlamStep Process(const cv::Mat& image, int64_t index, double stamp_s);
+  // A frame that could not be read: the camera may have moved far meanwhile, so the next frame is relocalised.
+  void SkipFrame() { after_gap_ = true; }
+
+  const slam::System& system() const { return system_; }
+  slam::System& system() { return system_; }
+  const frontend::Frontend& frontend() const { return frontend_; }
+  const VisualSlamOptions& options() const { return options_; }
+
+ private:
+  std::vector<frontend::RemapRequest> RemapRequests() const;
+  void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step);
+
+  PinholeCamera camera_;
+  VisualSlamOptions options_;
+  frontend::Frontend frontend_;
+  slam::System system_;
+  std::unordered_map<int64_t, frontend::Descriptor> lost_descriptors_;  // map points whose track ended
+  std::optional<Pose> latest_cam_from_world_;
+  bool was_lost_ = false;
+  bool after_gap_ = false;  // frames were skipped since the last one processed
+};
+
+}  // namespace mcslam::pipeline
