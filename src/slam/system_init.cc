@@ -1,0 +1,563 @@
+// The System's initialisation (paper §6.1): two views, the window refined by bundle adjustment, the
+// depth-reversal ambiguity test, frames before the reference, and the settling of the first map.
+#include "slam/system.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <unordered_map>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+
+#include "core/median.h"
+#include "geometry/bundle_adjust.h"
+#include "geometry/pnp.h"
+#include "geometry/rotation_only.h"
+#include "geometry/triangulation.h"
+#include "slam/fibonacci.h"
+#include "slam/system_internal.h"
+
+namespace mcslam::slam {
+
+using detail::Ms;
+using detail::NoiseFromMedianResidualPx;
+using detail::ParallaxForDepthNoiseDeg;
+
+System::WindowPoints System::CollectWindowPoints(const std::vector<int>& window) {
+  WindowPoints wp;
+  std::unordered_map<int64_t, int> count, index;
+  for (int s : window)
+    for (const FeatureUndistorted& f : map_.frames[s].features)
+      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
+  for (size_t w = 0; w < window.size(); ++w)
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
+      MapPoint* p = map_.Find(f.id);
+      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
+      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
+      if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world);
+      wp.obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
+    }
+  return wp;
+}
+
+int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index) {
+  std::vector<std::vector<double>> residuals(wp.pts.size());
+  for (const geometry::BundleObservation& o : wp.obs)
+    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], wp.X[o.point], o.uv_norm, focal_px_));
+  int removed = 0;
+  for (size_t i = 0; i < wp.pts.size(); ++i) {
+    wp.pts[i]->position_in_world = wp.X[i];
+    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > options_.mapping.adjust_threshold_px) {
+      wp.pts[i]->state = PointState::kRemoved;
+      wp.pts[i]->removed_frame = frame_index;
+      ++removed;
+    }
+  }
+  return removed;
+}
+
+double System::ParallaxFromReference(int slot) const {
+  const FrameRecord& ref = map_.frames[reference_slot_];
+  const FrameRecord& cur = map_.frames[slot];
+  const Pose pair[2] = {ref.cam_from_world, cur.cam_from_world};
+  std::vector<double> parallax;
+  for (const FeatureUndistorted& f : cur.features) {
+    const MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved || !ref.Find(f.id)) continue;
+    parallax.push_back(geometry::ParallaxDeg(pair, p->position_in_world));
+  }
+  // Too few points shared with the reference to say: the view has moved on, as far as the start can tell.
+  if (parallax.size() < static_cast<size_t>(init_min_points_)) return std::numeric_limits<double>::infinity();
+  return UpperMedian(parallax);
+}
+
+void System::Settle(int slot, std::vector<FrameReport>* out) {
+  const InitOptions& io = options_.init;
+  const double parallax = ParallaxFromReference(slot);
+  // Posed frames since the reference (at most settle_max_frames, evenly spread, with the reference, the
+  // initialisation's frame and this one), and every map point seen at least twice among them.
+  std::vector<int> posed;
+  for (int s = reference_slot_; s <= slot; ++s)
+    if (map_.frames[s].has_pose) posed.push_back(s);
+  std::vector<int> window;
+  const int n = static_cast<int>(posed.size()), m = std::min(n, io.settle_max_frames);
+  for (int i = 0; i < m; ++i) window.push_back(posed[static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)]);
+  if (std::find(window.begin(), window.end(), init_slot_) == window.end()) window.push_back(init_slot_);
+  std::sort(window.begin(), window.end());
+  window.erase(std::unique(window.begin(), window.end()), window.end());
+  std::vector<Pose> cams;
+  for (int s : window) cams.push_back(map_.frames[s].cam_from_world);
+  WindowPoints wp = CollectWindowPoints(window);
+  std::vector<Eigen::Vector3d>& X = wp.X;
+  const std::vector<geometry::BundleObservation>& obs = wp.obs;
+  std::vector<bool> fixed(window.size(), false);
+  fixed.front() = true;  // the reference camera is the world
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal_px_;
+  bo.huber_px = io.refine_huber_px;
+  bo.cauchy = true;  // tens of frames of tracks hold wrong matches: their pull must fade
+  // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
+  // the same trajectory.
+  bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
+  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  // The scale: the initialisation's baseline keeps its length (1, or the ground truth's with --gt-scale).
+  const auto init_it = std::find(window.begin(), window.end(), init_slot_);
+  const double b = init_it == window.end()
+                       ? 0.0
+                       : (cams[init_it - window.begin()].OriginOfTargetInSource() - cams.front().OriginOfTargetInSource()).norm();
+  const double s = b > 1e-12 ? init_baseline_ / b : 1.0;
+  for (Pose& c : cams) c.t *= s;
+  for (Eigen::Vector3d& x : X) x *= s;
+  std::unordered_map<int, Pose> moved_by;  // window slot -> new * old^-1
+  for (size_t w = 0; w < window.size(); ++w) {
+    moved_by[window[w]] = cams[w] * map_.frames[window[w]].cam_from_world.Inverse();
+    map_.frames[window[w]].cam_from_world = cams[w];
+  }
+  const FrameRecord& cur = map_.frames[slot];
+  StoreAdjustedPoints(cams, wp, cur.index);
+  RefreshInlierFlags(slot);  // at the moved current pose
+  // The posed frames left out of the adjustment, and those before the reference: each placed again against
+  // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
+  // was first placed with), or else moved with its neighbour in the window: for a frame before the
+  // reference, which stays the world, only the scale changes.
+  std::vector<int> left_out;
+  for (int k = posed_from_; k < reference_slot_; ++k) left_out.push_back(k);
+  for (int k : posed)
+    if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
+  for (int k : left_out) {
+    FrameRecord& f = map_.frames[k];
+    const bool before_reference = k < reference_slot_;
+    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers,
+                                                    before_reference ? options_.tracker.min_inlier_ratio : 0.0)) {
+      f.cam_from_world = *pose;
+    } else if (before_reference) {
+      f.cam_from_world.t *= s;
+    } else {
+      f.cam_from_world = moved_by[*(std::upper_bound(window.begin(), window.end(), k) - 1)] * f.cam_from_world;
+    }
+  }
+  const std::string note = fmt::format(
+      "{}: {} of {} frames and {} points refined together at a median parallax of {:.1f} deg",
+      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(), parallax);
+  settling_ = parallax < io.settle_parallax_deg;
+  next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
+  out->front().cam_from_world = cur.cam_from_world;
+  out->front().note = note;
+  ResidualStats(slot, &out->front());
+  for (int k = posed_from_; k <= slot; ++k) {
+    if (k == slot || !map_.frames[k].has_pose) continue;
+    FrameReport r = PosedReport(k);
+    r.pose_update = true;
+    out->push_back(r);
+  }
+}
+
+geometry::PnpOptions System::TrackerPnpOptions(int min_inliers) const {
+  geometry::PnpOptions po;
+  po.focal_px = focal_px_;
+  po.threshold_px = options_.tracker.inlier_threshold_px;
+  po.min_inliers = min_inliers;
+  return po;
+}
+
+std::optional<Pose> System::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const {
+  std::vector<Eigen::Vector3d> P;
+  std::vector<Eigen::Vector2d> uv;
+  for (const FeatureUndistorted& o : map_.frames[slot].features)
+    if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
+      P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
+  int inliers = 0;
+  std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &inliers);
+  if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
+  return pose;
+}
+
+int System::PoseFramesBefore(int before_slot, int first_slot) {
+  int first = before_slot;
+  for (int k = before_slot - 1; k >= std::max(first_slot, 0); --k) {
+    FrameRecord& f = map_.frames[k];
+    if (f.has_pose || f.features.empty()) break;
+    const std::optional<Pose> pose =
+        PlaceByPnp(k, options_.tracker.min_inliers, options_.tracker.min_inlier_ratio);
+    if (!pose) break;
+    f.has_pose = true;
+    f.cam_from_world = *pose;
+    first = k;
+  }
+  return first;
+}
+
+namespace {
+
+// The points mirrored in depth about their median depth along the reference camera's axis, each kept on its
+// ray (so the reference view is unchanged): the start of the depth-reversed twin of a two-view solution.
+std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref) {
+  std::vector<double> z;
+  for (const Eigen::Vector3d& X : points_in_ref) z.push_back(X.z());
+  const double z0 = UpperMedian(z);
+  std::vector<Eigen::Vector3d> out;
+  out.reserve(points_in_ref.size());
+  for (const Eigen::Vector3d& X : points_in_ref) {
+    const double zm = std::max(2.0 * z0 - X.z(), 0.1 * z0);
+    out.push_back(X * (zm / X.z()));
+  }
+  return out;
+}
+
+// Two refined initialisations are the same solution when their points' depths correlate at least this much
+// and their last cameras' orientations agree within kSameRotationDeg; the noise variance of the ambiguity test
+// is at least kCostFloorPx2 (a residual of 0.03 px), so that two exact fits of clean data do not count as a
+// clear winner and loser.
+constexpr double kSameStructureCorrelation = 0.9;
+constexpr double kSameRotationDeg = 2.0;
+constexpr double kCostFloorPx2 = 1e-3;
+
+// Pearson correlation of the depths (z) of the points two reconstructions share (by id): about -1 for a
+// depth-reversed pair, about +1 for the same structure; 1 when they share fewer than 3 points.
+double DepthCorrelation(const std::vector<Eigen::Vector3d>& a, const std::vector<int64_t>& a_ids,
+                        const std::vector<Eigen::Vector3d>& b, const std::vector<int64_t>& b_ids) {
+  std::unordered_map<int64_t, double> zb;
+  for (size_t i = 0; i < b.size() && i < b_ids.size(); ++i) zb[b_ids[i]] = b[i].z();
+  std::vector<std::pair<double, double>> z;
+  for (size_t i = 0; i < a.size() && i < a_ids.size(); ++i)
+    if (auto it = zb.find(a_ids[i]); it != zb.end()) z.emplace_back(a[i].z(), it->second);
+  if (z.size() < 3) return 1.0;
+  double ma = 0, mb = 0;
+  for (const auto& [x, y] : z) ma += x, mb += y;
+  ma /= static_cast<double>(z.size()), mb /= static_cast<double>(z.size());
+  double sab = 0, saa = 0, sbb = 0;
+  for (const auto& [x, y] : z) sab += (x - ma) * (y - mb), saa += (x - ma) * (x - ma), sbb += (y - mb) * (y - mb);
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 1.0;
+}
+
+}  // namespace
+
+std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector<int>& window,
+                                                               const std::optional<Pose>& last_from_ref,
+                                                               std::vector<Eigen::Vector3d> points,
+                                                               std::vector<int64_t> point_ids,
+                                                               std::string* failure, bool check_parallax) const {
+  const InitOptions& io = options_.init;
+  const double focal = focal_px_;
+  auto fail = [&](std::string why) -> std::optional<InitHypothesis> {
+    if (failure) *failure = std::move(why);
+    return std::nullopt;
+  };
+  InitHypothesis h;
+  h.points = std::move(points);
+  h.point_ids = std::move(point_ids);
+  std::unordered_map<int64_t, int> index;
+  for (size_t i = 0; i < h.point_ids.size(); ++i) index[h.point_ids[i]] = static_cast<int>(i);
+  h.poses.assign(window.size(), Pose());
+  if (last_from_ref) h.poses.back() = *last_from_ref;
+  std::vector<bool> fixed(window.size(), false);
+  fixed.front() = true;
+  geometry::PnpOptions po;
+  po.focal_px = focal;
+  po.threshold_px = options_.mapping.max_reprojection_px;
+  std::vector<geometry::BundleObservation> obs;
+  for (size_t w = 0; w < window.size(); ++w) {
+    std::vector<Eigen::Vector3d> P;
+    std::vector<Eigen::Vector2d> uv;
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features)
+      if (auto it = index.find(f.id); it != index.end()) {
+        const Eigen::Vector2d n = ideal_.PixelToNormalized(f.uv_px);
+        obs.push_back({static_cast<int>(w), it->second, n});
+        P.push_back(h.points[it->second]);
+        uv.push_back(n);
+      }
+    if (w == 0 || (last_from_ref && w + 1 == window.size())) continue;
+    const std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
+    h.poses[w] = pose ? *pose : h.poses[w - 1];
+  }
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal;
+  bo.huber_px = io.refine_huber_px;
+  if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
+  std::vector<double> res;
+  double cost = 0;
+  const double cap_sq = options_.mapping.max_reprojection_px * options_.mapping.max_reprojection_px;
+  for (const geometry::BundleObservation& o : obs) {
+    res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
+    cost += std::min(res.back() * res.back(), cap_sq);
+  }
+  h.median_px = UpperMedian(res);
+  h.cost = obs.empty() ? std::numeric_limits<double>::infinity() : cost / static_cast<double>(obs.size());
+  h.observations = static_cast<int>(obs.size());
+  std::vector<double> z;
+  for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
+  if (!(UpperMedian(z) > 0)) return fail("refined window: the points ended behind the reference camera");
+  // The refined window must still have the parallax asked for (between the first and the last camera), and
+  // enough for the tracks' noise: two views of a parallax θ fix a depth to about σ / (f θ) of itself, σ the
+  // noise of a feature (the window's median residual is 1.18 σ for Gaussian noise, σ per coordinate).
+  std::vector<double> parallax;
+  const Pose ends[2] = {h.poses.front(), h.poses.back()};
+  for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
+  const double refined_parallax = UpperMedian(parallax);
+  const double noise_px = NoiseFromMedianResidualPx(h.median_px);
+  const double needed =
+      std::max(io.min_median_parallax_deg, ParallaxForDepthNoiseDeg(noise_px, focal, io.max_relative_depth_noise));
+  h.parallax_ok = refined_parallax >= needed;
+  if (check_parallax && !h.parallax_ok)
+    return fail(fmt::format("refined window: median parallax {:.2f} deg < {:.2f} deg (the tracks' noise, {:.2f} px, "
+                            "asks for it)",
+                            refined_parallax, needed, noise_px));
+  return h;
+}
+
+bool System::TryInitialise(std::vector<FrameReport>* out) {
+  const InitOptions& io = options_.init;
+  const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
+  auto note = [&](std::string s) {
+    FrameReport r;
+    r.note = std::move(s);
+    out->assign(1, r);
+    return false;
+  };
+  if (reference_slot_ < 0) {
+    reference_slot_ = cur_slot;
+    return note("reference frame for initialisation");
+  }
+  // Correspondences between the reference and this frame. Forward motion (a car) and fast turns lose features
+  // quickly: when too few are shared, the reference moves on to the oldest frame since it that still shares
+  // enough with this one, so that the motion gathered since is kept (moving it to this frame would start over).
+  std::vector<Eigen::Vector2d> n1, n2;
+  std::vector<int64_t> ids;
+  std::vector<double> motion_deg;  // angle between the two rays of a feature, the rotation not removed
+  auto correspond = [&](int ref_slot) {
+    n1.clear(), n2.clear(), ids.clear(), motion_deg.clear();
+    const FrameRecord& r = map_.frames[ref_slot];
+    for (const FeatureUndistorted& f : map_.frames[cur_slot].features) {
+      const FeatureUndistorted* g = r.Find(f.id);
+      if (!g) continue;
+      n1.push_back(ideal_.PixelToNormalized(g->uv_px));
+      n2.push_back(ideal_.PixelToNormalized(f.uv_px));
+      ids.push_back(f.id);
+      const Eigen::Vector3d a = n1.back().homogeneous().normalized(), b = n2.back().homogeneous().normalized();
+      motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
+    }
+  };
+  // The counts asked for, lowered where the frame tracks few features (InitOptions::min_shared_fraction).
+  const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
+                                                 static_cast<double>(map_.frames[cur_slot].features.size())));
+  auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
+  const int need_common = lowered(io.min_common_features), need_inliers = lowered(io.min_inliers),
+            need_points = lowered(io.min_points);
+  correspond(reference_slot_);
+  if (static_cast<int>(ids.size()) < need_common) {
+    int next = cur_slot;
+    for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
+      int shared = 0;
+      for (const FeatureUndistorted& f : map_.frames[cur_slot].features) shared += map_.frames[s].Find(f.id) != nullptr;
+      if (shared >= need_common) next = s;
+    }
+    const size_t had = ids.size();
+    reference_slot_ = next;
+    if (next == cur_slot) return note(fmt::format("only {} features shared with the reference: new reference", had));
+    correspond(reference_slot_);
+  }
+  const FrameRecord& ref = map_.frames[reference_slot_];
+  const FrameRecord& cur = map_.frames[cur_slot];
+  const double med_motion = UpperMedian(motion_deg);
+  if (med_motion < io.min_median_motion_deg)
+    return note(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
+
+  // Two-view hypotheses: the 8-point method with two RANSAC seeds, OpenCV's 5-point method, and, when a
+  // homography explains the views (a dominant plane), the motions of its decomposition. Each places every
+  // frame of the window by PnP against its points and is refined by one bundle adjustment over the whole
+  // window; the one that explains the window best is kept. With a narrow field of view two views leave a
+  // near-free bas-relief direction and sometimes a twisted pair; a wrong basin cannot explain tens of views
+  // as well as the right one.
+  std::vector<int> window;
+  for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
+  if (static_cast<int>(window.size()) < io.min_window_frames)
+    return note(fmt::format("{} frames since the reference (the window needs {}: two views leave the depth "
+                            "reversal open)",
+                            window.size(), io.min_window_frames));
+  const double focal = focal_px_;
+  std::string last_failure;
+  geometry::TwoViewOptions tv;
+  tv.ransac_threshold_px = io.ransac_threshold_px;
+  tv.focal_px = focal;
+  tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+  std::vector<geometry::TwoViewResult> seeds;
+  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
+                                                                   {io.method, options_.seed + 1},
+                                                                   {geometry::EssentialMethod::kFivePointOpenCV, 0},
+                                                                   {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
+  bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
+  bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
+  bool planar = false;            // a homography explains the views
+  for (const auto& [method, seed] : tries) {
+    if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
+    if (method == geometry::EssentialMethod::kFivePointOpenCV) {
+      if (five_point_tried) continue;
+      five_point_tried = true;
+    }
+    tv.method = method;
+    tv.seed = seed;
+    geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
+    if (!tvr.ok) {
+      last_failure = "two-view geometry failed: " + tvr.failure;
+      planar |= tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
+      // Only a refusal of the data itself (too few, NaN, planar or pure rotation) holds for every seed.
+      const bool data_refused = tvr.status == geometry::TwoViewStatus::kBadInput ||
+                                tvr.status == geometry::TwoViewStatus::kTooFewCorrespondences ||
+                                tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
+      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint && data_refused;
+      continue;
+    }
+    seeds.push_back(std::move(tvr));
+  }
+  const size_t num_essential_seeds = seeds.size();
+  if (planar)
+    for (geometry::TwoViewResult& tvr : geometry::EstimateTwoViewPlanar(n1, n2, tv)) seeds.push_back(std::move(tvr));
+
+  std::vector<InitHypothesis> refined;
+  for (size_t k = 0; k < seeds.size(); ++k) {
+    const geometry::TwoViewResult& tvr = seeds[k];
+    const bool passes = tvr.num_inliers >= need_inliers && tvr.num_triangulated >= need_points &&
+                        tvr.median_parallax_deg >= io.min_median_parallax_deg;
+    if (!passes)
+      last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
+                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, need_inliers,
+                                 need_points, io.min_median_parallax_deg);
+    // A plane's motions are judged together: one short of the gates still stands against the other.
+    const bool planar_seed = k >= num_essential_seeds;
+    if (!passes && !planar_seed) continue;
+    std::vector<Eigen::Vector3d> points;
+    std::vector<int64_t> point_ids;
+    for (size_t i = 0; i < ids.size(); ++i)
+      if (tvr.triangulated[i]) points.push_back(tvr.points_in_cam1[i]), point_ids.push_back(ids[i]);
+    std::string why;
+    std::optional<InitHypothesis> h = RefineInitWindow(window, tvr.cam2_from_cam1, points, point_ids, &why, passes);
+    if (!h) {
+      if (passes) last_failure = why;
+      continue;
+    }
+    h->two_view_inliers = tvr.num_inliers;
+    h->two_view_parallax_deg = tvr.median_parallax_deg;
+    h->eligible = passes;
+    refined.push_back(std::move(*h));
+  }
+  auto cheapest = [&] {
+    auto best_it = refined.end();
+    for (auto it = refined.begin(); it != refined.end(); ++it)
+      if (it->eligible && (best_it == refined.end() || it->cost < best_it->cost)) best_it = it;
+    return best_it;
+  };
+  if (cheapest() == refined.end()) return note(last_failure);
+  // The depth-reversal (Necker) ambiguity: seen through a narrow field of view, a scene and its mirror image
+  // in depth, with the cameras turned the other way, project nearly alike. The mirror of the winner is refined
+  // too and competes with the rest.
+  {
+    const InitHypothesis& winner = *cheapest();
+    // Refined whatever its parallax: short of it, it still stands against the winner.
+    if (std::optional<InitHypothesis> mirror = RefineInitWindow(window, std::nullopt, MirrorInDepth(winner.points),
+                                                                winner.point_ids, nullptr, /*check_parallax=*/false)) {
+      mirror->two_view_inliers = winner.two_view_inliers;
+      mirror->two_view_parallax_deg = winner.two_view_parallax_deg;
+      mirror->mirrored = true;
+      mirror->eligible = mirror->parallax_ok;
+      refined.push_back(std::move(*mirror));
+    }
+  }
+  // Ambiguity: another solution with another structure (its points' depths not in step with the winner's: the
+  // depth-reversed mirror, the plane's twin) explains the window about as well. The views cannot tell them
+  // apart yet: wait for more motion rather than risk a wrong (mirrored, twisted) map.
+  std::optional<InitHypothesis> best = *cheapest();
+  for (const InitHypothesis& h : refined) {
+    const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||
+                          AngularDistanceDeg(best->poses.back().q, h.poses.back().q) > kSameRotationDeg;
+    // How much worse it explains the window, as a chi-square: the summed squared residuals' difference over
+    // the window's noise variance (the best solution's mean squared residual, at least the floor's).
+    const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
+    if (distinct && chi2 < io.ambiguity_chi2) {
+      note(fmt::format("ambiguous initialisation: {} explains the window about as well as the best solution (mean "
+                       "squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
+                       h.mirrored ? "its mirror in depth" : "another solution with another structure", h.cost,
+                       best->cost));
+      out->front().init_rejected = true;
+      return false;
+    }
+  }
+
+  // Gauge: the reference camera is the world; the first baseline has length 1, or the true length when
+  // the ground truth is offered (--gt-scale, as the paper sets the scale by hand for its precision test).
+  double baseline = 1.0;
+  if (oracle_) {
+    const std::optional<double> d = oracle_(ref.stamp_s, cur.stamp_s);
+    if (!d || !std::isfinite(*d) || !(*d > 0))
+      throw std::runtime_error(fmt::format(
+          "--gt-scale: the ground truth gives no baseline between frames {} (t = {:.6f} s) and {} (t = {:.6f} s): "
+          "no pose near those stamps, or the camera did not move",
+          ref.index, ref.stamp_s, cur.index, cur.stamp_s));
+    baseline = *d;
+  }
+  const double b = (best->poses.back().OriginOfTargetInSource() - best->poses.front().OriginOfTargetInSource()).norm();
+  const double s = b > 1e-12 ? baseline / b : 1.0;
+  std::vector<double> depths;
+  for (size_t i = 0; i < best->points.size(); ++i) {
+    MapPoint p;
+    p.id = best->point_ids[i];
+    p.position_in_world = best->points[i] * s;
+    p.last_seen_frame = cur.index;
+    map_.Add(p);
+    depths.push_back(p.position_in_world.z());
+  }
+  for (size_t w = 0; w < window.size(); ++w) {
+    FrameRecord& f = map_.frames[window[w]];
+    f.has_pose = true;
+    f.cam_from_world = best->poses[w];
+    f.cam_from_world.t *= s;
+    map_.keyframes.push_back(window[w]);
+  }
+  last_posed_slot_ = cur_slot;
+  init_slot_ = cur_slot;
+  init_baseline_ = baseline;
+  settling_ = io.settle_parallax_deg > 0;
+  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
+  MarkSeen(cur_slot);
+  RefreshInlierFlags(cur_slot);
+  PoseTrackerOptions topts = options_.tracker;
+  topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
+  tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
+  initialised_ = true;
+  init_min_points_ = need_points;
+  posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
+
+  out->clear();
+  smoother_.Reset();
+  for (size_t w = 0; w < window.size(); ++w) {
+    FrameReport r = PosedReport(window[w]);
+    r.keyframe = true;
+    r.initialisation = true;
+    r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
+    if (w + 1 == window.size()) {
+      r.new_points = static_cast<int>(depths.size());
+      r.note = fmt::format(
+          "initialised from frames {} and {}: {} inliers, {} points, median parallax {:.2f} deg, window of {} frames "
+          "refined to a median reprojection error of {:.2f} px{}",
+          ref.index, cur.index, best->two_view_inliers, depths.size(), best->two_view_parallax_deg,
+          window.size(), best->median_px,
+          best->mirrored ? " (the depth-reversed twin of the two-view solution, which explained the window better)" : "");
+    }
+    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    out->push_back(r);
+  }
+  // The frames before the reference: poses, unsmoothed (the smoother runs forward from the reference). After
+  // the window's reports, so that the first report with a note is the one that says how the map was made.
+  for (int k = posed_from_; k < reference_slot_; ++k) {
+    FrameReport r = PosedReport(k);
+    r.initialisation = true;
+    r.smoothed_cam_from_world = r.cam_from_world;
+    r.note = fmt::format("posed at the initialisation (frame {}), before its reference frame", cur.index);
+    out->push_back(r);
+  }
+  return true;
+}
+
+}  // namespace mcslam::slam

@@ -1,0 +1,24 @@
+#pragma once
+// Helpers shared by the System's stage files (system.cc, system_init.cc, system_track.cc, system_map.cc);
+// not part of the slam layer's interface.
+#include <chrono>
+#include <string>
+
+#include "core/pose.h"
+
+namespace mcslam::slam::detail {
+
+// The noise σ of a feature (px, per coordinate) from a median reprojection residual: 1.1774 σ for Gaussian noise.
+inline double NoiseFromMedianResidualPx(double median_residual_px) { return median_residual_px / 1.1774; }
+
+// The parallax (degrees) at which two views fix a point's depth to `relative_depth_noise` of itself: a parallax
+// θ fixes it to about σ / (f θ). Used for the first map and for new points alike.
+inline double ParallaxForDepthNoiseDeg(double noise_px, double focal_px, double relative_depth_noise) {
+  return RadToDeg(noise_px / (focal_px * relative_depth_noise));
+}
+
+inline double Ms(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace mcslam::slam::detail

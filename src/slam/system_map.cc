@@ -1,0 +1,294 @@
+// The System's mapping (paper §6.2-6.3): new points by triangulation, Monte Carlo point adjustment over
+// Fibonacci-spaced keyframes (Algorithm 2, Eqs. 7-10), local bundle adjustment (the baseline), the frame history.
+#include "slam/system.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <unordered_map>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+
+#include "core/median.h"
+#include "geometry/bundle_adjust.h"
+#include "geometry/pnp.h"
+#include "geometry/rotation_only.h"
+#include "geometry/triangulation.h"
+#include "slam/fibonacci.h"
+#include "slam/system_internal.h"
+
+namespace mcslam::slam {
+
+using detail::Ms;
+using detail::NoiseFromMedianResidualPx;
+using detail::ParallaxForDepthNoiseDeg;
+
+void System::MarkSeen(int slot) {
+  const FrameRecord& fr = map_.frames[slot];
+  for (const FeatureUndistorted& f : fr.features)
+    if (MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) {
+      p->last_seen_frame = fr.index;
+      p->state = PointState::kActive;
+    }
+  for (MapPoint& p : map_.points())
+    if (p.state == PointState::kActive && p.last_seen_frame < fr.index) p.state = PointState::kLost;
+}
+
+int System::TriangulateNewPoints(int slot, int inliers) {
+  const MappingOptions& mo = options_.mapping;
+  const FrameRecord& cur = map_.frames[slot];
+  geometry::TriangulationOptions to;
+  to.max_reprojection_px = mo.max_reprojection_px;
+  to.focal_px = focal_px_;
+  // The parallax a new point needs: at least min_parallax_deg, and enough for the tracks' noise, measured as
+  // the median residual of the map's points in the recent keyframes (1.18 σ for Gaussian noise of σ per
+  // coordinate): a point triangulated from a parallax θ has a depth error of about σ / (f θ) of its depth,
+  // and new points' depth errors are what a monocular map's scale drifts with.
+  {
+    FrameReport stats;
+    ResidualStats(slot, &stats);
+    if (stats.reproj_median_px > 0) recent_residual_px_.push_back(stats.reproj_median_px);
+    if (recent_residual_px_.size() > kResidualHistory) recent_residual_px_.pop_front();
+  }
+  const double noise_px = RecentNoisePx().value_or(0.0);
+  noise_parallax_deg_ = std::min(ParallaxForDepthNoiseDeg(noise_px, focal_px_, mo.max_relative_depth_noise),
+                                 mo.max_noise_parallax_deg);
+  const double wanted = std::max(mo.min_parallax_deg, noise_parallax_deg_);
+  to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(wanted, mo.starving_parallax_deg) : wanted;
+  int added = 0;
+  for (const FeatureUndistorted& f : cur.features) {
+    MapPoint* existing = map_.Find(f.id);
+    if (existing && (existing->state != PointState::kRemoved ||
+                     cur.index - existing->removed_frame < mo.retriangulate_after_frames))
+      continue;
+    // Posed keyframes where this feature was seen, oldest first (the track's history).
+    std::vector<int> seen;
+    for (auto it = std::lower_bound(map_.keyframes.begin(), map_.keyframes.end(), pruned_until_);
+         it != map_.keyframes.end(); ++it)
+      if (map_.frames[*it].has_pose && map_.frames[*it].Find(f.id)) seen.push_back(*it);
+    if (static_cast<int>(seen.size()) < mo.min_track_frames) continue;
+    // Robust linear triangulation: a point from each of a few view pairs (first-current, and pairs that
+    // skip the first or the current view in case a wrong match sits there), the views that agree with it
+    // within the reprojection threshold counted, and the best pair's agreeing views triangulated together.
+    // A wrong match or one noisy view then costs a view, not the point.
+    const int n = static_cast<int>(seen.size());
+    const int first = 0, last = n - 1, mid = n / 2;
+    const int pairs[4][2] = {{first, last}, {std::min(1, last), last}, {first, std::max(last - 1, 0)}, {first, mid}};
+    geometry::TriangulationOptions pair_opts = to;
+    std::vector<int> best_views;
+    for (const auto& pr : pairs) {
+      if (pr[0] >= pr[1]) continue;
+      const Pose poses2[2] = {map_.frames[seen[pr[0]]].cam_from_world, map_.frames[seen[pr[1]]].cam_from_world};
+      const Eigen::Vector2d uv2[2] = {ideal_.PixelToNormalized(map_.frames[seen[pr[0]]].Find(f.id)->uv_px),
+                                      ideal_.PixelToNormalized(map_.frames[seen[pr[1]]].Find(f.id)->uv_px)};
+      const geometry::Triangulation t2 = geometry::TriangulateDlt(poses2, uv2, pair_opts);
+      if (!t2.ok) continue;
+      std::vector<int> agree;
+      for (int k : seen) {
+        Eigen::Vector2d uv;
+        if (ideal_.ProjectWorld(map_.frames[k].cam_from_world, t2.point_in_world, &uv) &&
+            (uv - map_.frames[k].Find(f.id)->uv_px).norm() <= mo.max_reprojection_px)
+          agree.push_back(k);
+      }
+      if (agree.size() > best_views.size()) best_views = agree;
+    }
+    if (static_cast<int>(best_views.size()) < mo.min_track_frames) continue;
+    std::vector<Pose> poses;
+    std::vector<Eigen::Vector2d> uv;
+    for (int k : best_views) {
+      poses.push_back(map_.frames[k].cam_from_world);
+      uv.push_back(ideal_.PixelToNormalized(map_.frames[k].Find(f.id)->uv_px));
+    }
+    const geometry::Triangulation t = geometry::TriangulateDlt(poses, uv, to);
+    if (!t.ok) continue;
+    MapPoint p;
+    p.id = f.id;
+    p.position_in_world = t.point_in_world;
+    p.last_seen_frame = cur.index;
+    if (existing)
+      *existing = p;
+    else
+      map_.Add(p);
+    ++added;
+  }
+  return added;
+}
+
+void System::PruneHistory(int slot) {
+  int keep_from = slot - options_.mapping.history_frames;
+  // The oldest keyframe the Fibonacci window can still reach.
+  const long reach = FibonacciReach(options_.mapping.window);
+  const long nkf = static_cast<long>(map_.keyframes.size());
+  if (nkf > 0) keep_from = std::min(keep_from, map_.keyframes[static_cast<size_t>(std::max(0L, nkf - 1 - reach))]);
+  // The initialisation and the settling work on every frame since the reference (or the first frame posed
+  // before it).
+  if ((!initialised_ || settling_) && reference_slot_ >= 0)
+    keep_from = std::min(keep_from, posed_from_ >= 0 ? posed_from_ : reference_slot_);  // posed_from_ <= reference
+  for (; pruned_until_ < keep_from; ++pruned_until_) {
+    std::vector<FeatureUndistorted>().swap(map_.frames[static_cast<size_t>(pruned_until_)].features);
+  }
+}
+
+std::vector<int> System::WindowSlots() const {
+  std::vector<int> window;  // frame slots, newest first
+  for (int wi : FibonacciWindow(static_cast<int>(map_.keyframes.size()), options_.mapping.window))
+    if (map_.frames[map_.keyframes[wi]].has_pose) window.push_back(map_.keyframes[wi]);
+  return window;
+}
+
+void System::BundleAdjustWindow(int slot, FrameReport* r) {
+  // The structure baseline (§8): Levenberg-Marquardt bundle adjustment (Ceres, Huber) of the poses of the
+  // same Fibonacci keyframe window the Monte Carlo adjustment scores over, and of every point seen at least
+  // twice in it; the oldest keyframes stay fixed (gauge and scale). Outliers leave the map by the same rule
+  // as in the Monte Carlo adjustment: median residual over the window above the threshold.
+  const std::vector<int> adjustable_slots = WindowSlots();
+  if (adjustable_slots.size() < 3) return;
+  // The cameras: every posed keyframe from the oldest of the window to this one. The window's keyframes are
+  // adjusted (but for the oldest, which fix the gauge and the scale); the keyframes between them are held
+  // fixed, so that a point moved here stays consistent with every view of it that a later window may use.
+  std::vector<int> window;  // oldest first
+  std::vector<bool> fixed;
+  const int oldest = adjustable_slots.back();
+  for (int k : map_.keyframes) {
+    if (k < oldest || !map_.frames[k].has_pose) continue;
+    const bool in_window = std::find(adjustable_slots.begin(), adjustable_slots.end(), k) != adjustable_slots.end();
+    const int rank = static_cast<int>(adjustable_slots.end() - std::find(adjustable_slots.begin(), adjustable_slots.end(), k));
+    window.push_back(k);
+    fixed.push_back(!in_window || rank <= options_.ba_fixed_keyframes);
+  }
+  std::vector<Pose> cams;
+  for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
+  WindowPoints wp = CollectWindowPoints(window);
+  if (wp.pts.empty()) return;
+  std::vector<Eigen::Vector3d>& X = wp.X;
+  const std::vector<geometry::BundleObservation>& obs = wp.obs;
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal_px_;
+  bo.huber_px = options_.init.refine_huber_px;
+  bo.max_iterations = options_.ba_iterations;
+  bo.cauchy = true;  // wrong matches of tens of pixels must stop pulling (Huber's pull never fades)
+  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  for (size_t w = 0; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
+  const int removed = StoreAdjustedPoints(cams, wp, map_.frames[slot].index);
+  r->removed += removed;
+  r->adjusted += static_cast<int>(wp.pts.size()) - removed;
+}
+
+void System::AdjustPoints(int slot, FrameReport* r) {
+  const MappingOptions& mo = options_.mapping;
+  const FrameRecord& cur = map_.frames[slot];
+  std::vector<int> window;  // frame slots
+  std::vector<compute::ScaledPose> poses;
+  for (int ws : WindowSlots()) {
+    const FrameRecord& k = map_.frames[ws];
+    window.push_back(ws);
+    const Eigen::Quaterniond q = k.cam_from_world.q.normalized();
+    const float qf[4] = {float(q.w()), float(q.x()), float(q.y()), float(q.z())};
+    const float tf[3] = {float(k.cam_from_world.t.x()), float(k.cam_from_world.t.y()), float(k.cam_from_world.t.z())};
+    poses.push_back(compute::MakeScaledPose(qf, tf, float(camera_.fx), float(camera_.fy)));
+  }
+  if (window.size() < 2) return;
+
+  // The residual of a point (Algorithm 2) is read robustly: the median of its reprojection distances over
+  // the window's keyframes, so that one wrong match (a feature on the wrong spot in one frame) neither makes
+  // a good point a candidate nor condemns it.
+  auto median_residual = [&](const std::vector<std::pair<int, Eigen::Vector2d>>& views, const Eigen::Vector3d& X) {
+    std::vector<double> d;
+    for (const auto& [w, uv_obs] : views) {
+      Eigen::Vector2d uv;
+      d.push_back(ideal_.ProjectWorld(map_.frames[window[w]].cam_from_world, X, &uv) ? (uv - uv_obs).norm() : 1e9);
+    }
+    return UpperMedian(d);
+  };
+
+  // Candidates: points seen in this keyframe whose residual is above the threshold.
+  std::vector<MapPoint*> cand;
+  std::vector<double> before_residual;
+  std::vector<std::vector<std::pair<int, Eigen::Vector2d>>> cand_views;
+  std::vector<float> cx, cy, cz, sx, sy, sz, ou, ov;
+  std::vector<int> obs_begin{0}, obs_pose;
+  std::vector<std::pair<int, Eigen::Vector2d>> views;
+  for (const FeatureUndistorted& f : cur.features) {
+    MapPoint* p = map_.Find(f.id);
+    if (!p || p->state == PointState::kRemoved) continue;
+    views.clear();
+    for (size_t w = 0; w < window.size(); ++w)
+      if (const FeatureUndistorted* o = map_.frames[window[w]].Find(f.id)) views.emplace_back(static_cast<int>(w), o->uv_px);
+    // Fewer than 3 views: one view cannot tell a point from its ray, and the median of two residuals is not
+    // robust to one wrong match, so no verdict is passed on this point yet.
+    if (views.size() < 3) continue;
+    const double before = median_residual(views, p->position_in_world);
+    if (before <= mo.candidate_threshold_px) continue;
+    // Eqs. 8-9: the point displacement dz that the linearised projection model says would move its
+    // projections onto the features, stacked over the window's views (Huber-weighted, so that a wrong
+    // match does not drive it): unlike one view, several see the point's depth error too. The spread is
+    // |dz| per axis plus a floor.
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (const auto& [w, uv_obs] : views) {
+      Eigen::Vector2d uv;
+      Eigen::Matrix<double, 2, 3> J;
+      if (!ideal_.ProjectWorld(map_.frames[window[w]].cam_from_world, p->position_in_world, &uv, &J)) continue;
+      const Eigen::Vector2d res = uv_obs - uv;
+      const double e = res.norm(), k = 2.0 * mo.adjust_threshold_px;
+      const double wgt = e <= k ? 1.0 : k / e;
+      A += wgt * J.transpose() * J;
+      b += wgt * J.transpose() * res;
+    }
+    A += 1e-6 * A.trace() * Eigen::Matrix3d::Identity();  // a ridge: a short baseline leaves depth nearly free
+    Eigen::Vector3d dz = A.ldlt().solve(b);
+    if (!dz.allFinite()) dz.setZero();
+    const double depth = (cur.cam_from_world * p->position_in_world).z();
+    if (!(depth > 0)) continue;  // behind this keyframe: no spread can be derived from it
+    const Eigen::Vector3d sigma = (mo.sigma_scale * dz.cwiseAbs()).array() + mo.sigma_floor_rel_depth * depth;
+    for (const auto& [w, uv_obs] : views) {
+      obs_pose.push_back(w);
+      ou.push_back(float(uv_obs.x() - camera_.cx));
+      ov.push_back(float(uv_obs.y() - camera_.cy));
+    }
+    cand.push_back(p);
+    before_residual.push_back(before);
+    cand_views.push_back(views);
+    cx.push_back(float(p->position_in_world.x())), cy.push_back(float(p->position_in_world.y()));
+    cz.push_back(float(p->position_in_world.z()));
+    sx.push_back(float(sigma.x())), sy.push_back(float(sigma.y())), sz.push_back(float(sigma.z()));
+    obs_begin.push_back(static_cast<int>(obs_pose.size()));
+  }
+  if (cand.empty()) return;
+
+  compute::PointAdjustProblem pr;
+  pr.poses = poses.data();
+  pr.num_poses = static_cast<int>(poses.size());
+  pr.cx = cx.data(), pr.cy = cy.data(), pr.cz = cz.data();
+  pr.sx = sx.data(), pr.sy = sy.data(), pr.sz = sz.data();
+  pr.obs_begin = obs_begin.data();
+  pr.num_points = static_cast<int>(cand.size());
+  pr.obs_pose = obs_pose.data();
+  pr.obs_u = ou.data(), pr.obs_v = ov.data();
+  pr.params.fx = float(camera_.fx), pr.params.fy = float(camera_.fy);
+  pr.params.max_distance_px = float(mo.max_distance_px);
+  std::vector<compute::PointBest> best(cand.size());
+  point_kernel_->Score(pr, point_normals_, mo.samples, best.data());
+
+  // The best sample replaces the point when its residual is lower than before and under the threshold;
+  // otherwise the point is an outlier and leaves the map.
+  for (size_t p = 0; p < cand.size(); ++p) {
+    const Eigen::Vector3d X(best[p].position[0], best[p].position[1], best[p].position[2]);
+    const double after = best[p].index >= 0 ? median_residual(cand_views[p], X) : before_residual[p];
+    if (after < before_residual[p] && after < mo.adjust_threshold_px) {
+      cand[p]->position_in_world = X;
+      ++r->adjusted;
+    } else if (before_residual[p] < mo.adjust_threshold_px) {
+      // A candidate below the outlier threshold that no sample improves stays as it is.
+    } else {
+      cand[p]->state = PointState::kRemoved;
+      cand[p]->removed_frame = cur.index;
+      ++r->removed;
+    }
+  }
+}
+
+}  // namespace mcslam::slam
