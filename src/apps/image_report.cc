@@ -1,0 +1,257 @@
+#include "apps/image_report.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "apps/image_run.h"
+#include "core/median.h"
+#include "io/ply.h"
+
+namespace mcslam::apps {
+
+nlohmann::json StageJson(const Stage& s) {
+  nlohmann::json j;
+  j["count"] = s.ms.size();
+  if (s.ms.empty()) {
+    j["median_ms"] = nullptr, j["mean_ms"] = nullptr;
+    return j;
+  }
+  double sum = 0;
+  for (double x : s.ms) sum += x;
+  j["median_ms"] = UpperMedian(s.ms);
+  j["mean_ms"] = sum / static_cast<double>(s.ms.size());
+  return j;
+}
+
+nlohmann::json StatsJson(const eval::ErrorStats& s) {
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  return {{"count", s.count}, {"rmse", num(s.rmse)}, {"mean", num(s.mean)}, {"median", num(s.median)}, {"max", num(s.max)}};
+}
+
+void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
+                    const std::vector<slam::FrameReport>& reports, const std::map<int64_t, size_t>& report_of_index,
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index) {
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
+  f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
+       "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,features,fe_tracked,fe_detected,"
+       "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
+       "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
+       "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
+       "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,"
+       "fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms,note\n";
+  auto clean = [](std::string s) {
+    for (char& c : s)
+      if (c == ',' || c == '\n' || c == '\r') c = ';';
+    return s;
+  };
+  for (const FrameRow& row : rows) {
+    if (row.skipped) {
+      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,,,{:.3f},{}\n", row.index,
+                       row.stamp_s, row.decode_ms, row.frame_ms, clean(row.name + ": " + row.error));
+      continue;
+    }
+    auto it = report_of_index.find(row.index);
+    if (it == report_of_index.end()) continue;  // interrupted between the front end and the back end
+    const slam::FrameReport& r = reports[it->second];
+    std::string te, re;
+    if (auto e = error_of_index.find(row.index); r.has_pose && e != error_of_index.end())
+      te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
+    const frontend::FrameStats& s = row.fe;
+    f << fmt::format(
+        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
+        "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
+        r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
+        r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px, r.track_ms, r.map_ms,
+        r.adjust_ms, r.init_ms, te, re, row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward,
+        s.lost_patch_error, s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
+        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms,
+        s.describe_wait_ms, s.total_ms, row.frame_ms, clean(r.note));
+  }
+  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
+}
+
+void ImageRun::WriteReport() {
+  // Counts and per-stage times.
+  sum.frames = frames_processed;
+  sum.interrupted = interrupted;
+  sum.initialised = vslam->system().initialised();
+  Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
+      be_adjust, be_init, be_total, frame_total;
+  int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
+          remap_over_budget = 0, remap_refused = 0, refreshed = 0;
+  double features_sum = 0;
+  nlohmann::json skipped_frames = nlohmann::json::array();
+  for (const FrameRow& row : rows) {
+    decode.Add(row.decode_ms);
+    frame_total.Add(row.frame_ms);
+    if (row.skipped) {
+      ++sum.skipped;
+      skipped_frames.push_back({{"index", row.index}, {"name", row.name}, {"error", row.error}});
+      continue;
+    }
+    fe_convert.Add(row.fe.convert_ms), fe_pyramid.Add(row.fe.pyramid_ms), fe_track.Add(row.fe.track_ms);
+    fe_anchor.Add(row.fe.anchor_ms);
+    fe_detect.Add(row.fe.detect_ms), fe_remap.Add(row.fe.remap_ms), fe_describe.Add(row.fe.describe_ms);
+    fe_wait.Add(row.fe.describe_wait_ms), fe_total.Add(row.fe.total_ms);
+    remap_requests += row.fe.remap_requests, remapped += row.fe.remapped;
+    remap_outside += row.fe.remap_outside, remap_no_candidate += row.fe.remap_no_candidate;
+    remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
+    remap_refused += row.fe.remap_refused_id;
+    refreshed += row.fe.refreshed;
+    be_total.Add(row.backend_ms);
+    // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
+    // initialisation then replaces; the wall time of Process before the map exists is that time, all of it.
+    if (row.before_init) be_init.Add(row.backend_ms);
+    features_sum += row.features;
+  }
+  int64_t rotation_only = 0;  // of the tracked: posed by their turn about the last centre (the map out of view)
+  for (const slam::FrameReport& r : reports) {
+    rotation_only += r.rotation_only;
+    sum.tracked += r.status == slam::FrameStatus::kTracked;
+    sum.lost += r.status == slam::FrameStatus::kLost;
+    sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
+    sum.keyframes += r.keyframe;
+    be_track.Add(r.track_ms), be_map.Add(r.map_ms), be_adjust.Add(r.adjust_ms);
+  }
+  sum.fps = frames_processed / std::max(times.wall_s, 1e-9);
+  if (errors) sum.ate_rmse_m = errors->ate_m.rmse;
+
+  nlohmann::json j;
+  j["input"] = input;
+  j["dataset"] = io::ToString(data.kind);
+  j["source"] = data.source->Description();
+  j["camera"] = {{"fx", camera.fx}, {"fy", camera.fy}, {"cx", camera.cx}, {"cy", camera.cy},
+                 {"width", camera.width}, {"height", camera.height}, {"distorted", camera.HasDistortion()},
+                 {"origin", data.camera_origin}};
+  j["notes"] = notes;
+  j["options"] = {{"backend", backend},
+                  {"pose", sys_opts.pose_method == slam::PoseMethod::kPnp ? "pnp" : "mc"},
+                  {"structure", sys_opts.structure_method == slam::StructureMethod::kBundleAdjustment ? "ba" : "mc"},
+                  {"ba_iterations", sys_opts.ba_iterations},
+                  {"hypotheses", sys_opts.tracker.hypotheses},
+                  {"rounds", sys_opts.tracker.rounds},
+                  {"seed", sys_opts.seed},
+                  {"samples_per_point", sys_opts.mapping.samples},
+                  {"init_min_median_motion_deg", sys_opts.init.min_median_motion_deg},
+                  {"init_min_median_parallax_deg", sys_opts.init.min_median_parallax_deg},
+                  {"sigma_rot_deg", sys_opts.tracker.sigma_rot_deg},
+                  {"new_point_min_parallax_deg", sys_opts.mapping.min_parallax_deg},
+                  {"max_features", fe_opts.max_features},
+                  {"describe_async", fe_opts.describe_async},
+                  {"start", options.start},
+                  {"end", options.end}};
+  j["frames"] = frames_processed;
+  j["frames_read"] = frames_read;
+  j["skipped"] = sum.skipped;
+  j["skipped_frames"] = skipped_frames;
+  j["tracked"] = sum.tracked;
+  j["lost"] = sum.lost;
+  j["not_initialised"] = sum.not_initialised;
+  j["keyframes"] = sum.keyframes;
+  j["rotation_only"] = rotation_only;
+  j["map_points"] = sum.map_points;
+  j["initialised"] = sum.initialised;
+  j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);
+  j["initialisation_rejections"] = init_rejections;
+  j["interrupted"] = interrupted;
+  AddRunTimes(times, &j);
+  j["fps"] = sum.fps;
+  j["frontend"] = {{"mean_features", frames_processed > 0 ? features_sum / frames_processed : 0.0},
+                   {"remap_requests", remap_requests},
+                   {"remapped", remapped},
+                   {"remap_refused_id", remap_refused},
+                   {"remap_outside", remap_outside},
+                   {"remap_no_candidate", remap_no_candidate},
+                   {"remap_no_match", remap_no_match},
+                   {"remap_over_budget", remap_over_budget},
+                   {"descriptors_refreshed", refreshed}};
+  {
+    // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
+    // pose step succeeded from it.
+    int64_t tried = 0, pose_found = 0, reloc_tracked = 0;
+    Stage reloc_ms;
+    for (const FrameRow& row : rows) {
+      if (!row.reloc_tried) continue;
+      ++tried;
+      reloc_ms.Add(row.reloc_ms);
+      if (row.reloc_inliers == 0) continue;
+      ++pose_found;
+      if (auto it = report_of_index.find(row.index);
+          it != report_of_index.end() && reports[it->second].status == slam::FrameStatus::kTracked)
+        ++reloc_tracked;
+    }
+    j["relocalisation"] = {{"enabled", options.relocalise},
+                           {"tried", tried},
+                           {"pose_found", pose_found},
+                           {"tracked", reloc_tracked},
+                           {"ms", StageJson(reloc_ms)}};
+  }
+  // Front end stages and back end stages, over the frames where each did some work (map and adjust run on
+  // keyframes only, init before the map exists: the whole of System::Process then, the successful call too).
+  j["stages_ms"] = {{"decode", StageJson(decode)},
+                    {"frontend_total", StageJson(fe_total)},
+                    {"frontend_convert", StageJson(fe_convert)},
+                    {"frontend_pyramid", StageJson(fe_pyramid)},
+                    {"frontend_track", StageJson(fe_track)},
+                    {"frontend_anchor", StageJson(fe_anchor)},
+                    {"frontend_detect", StageJson(fe_detect)},
+                    {"frontend_remap", StageJson(fe_remap)},
+                    {"frontend_describe", StageJson(fe_describe)},
+                    {"frontend_describe_wait", StageJson(fe_wait)},
+                    {"init", StageJson(be_init)},
+                    {"track", StageJson(be_track)},
+                    {"map", StageJson(be_map)},
+                    {"adjust", StageJson(be_adjust)},
+                    {"backend_total", StageJson(be_total)},
+                    {"frame_total", StageJson(frame_total)}};
+  if (errors) {
+    j["ground_truth"] = {{"source", gt_origin},
+                         {"poses", gt->size()},
+                         {"matched", errors->matched()},
+                         {"alignment", "sim3"},
+                         {"scale", errors->alignment_result.gt_world_from_est_world.scale},
+                         // Positions that do not fix the rotation about the path's main direction (eval.h): rot_deg
+                         // then measures the alignment; rot_orient_deg does not depend on it.
+                         {"rotation_ambiguous", errors->alignment_result.rotation_ambiguous},
+                         {"lateral_spread_m", errors->alignment_result.lateral_spread_m},
+                         {"path_length_m", errors->gt_path_length_m},
+                         {"mirrored", errors->mirrored},
+                         {"ate_m", StatsJson(errors->ate_m)},
+                         {"rot_deg", StatsJson(errors->rot_deg)},
+                         {"rot_orient_deg", StatsJson(errors->rot_orient_deg)},
+                         {"rpe_delta", errors->rpe_delta},
+                         {"rpe_trans_m", StatsJson(errors->rpe_trans_m)},
+                         {"rpe_rot_deg", StatsJson(errors->rpe_rot_deg)}};
+  } else if (gt) {
+    j["ground_truth"] = {{"source", gt_origin}, {"poses", gt->size()}, {"error", eval_failure}};
+  } else {
+    j["ground_truth"] = nullptr;
+  }
+  j["error"] = failure.empty() ? nlohmann::json(nullptr) : nlohmann::json(failure);
+  WriteReportJson((out / "report.json").string(), j);
+}
+
+void ImageRun::WritePlot() {
+  if (!options.plot_path.empty()) {
+    std::vector<Eigen::Vector3d> ref, est;
+    std::vector<std::string> caption{fmt::format("{} ({} frames, {} tracked)", data.path, frames_processed, sum.tracked)};
+    if (errors) {
+      for (const eval::FrameError& e : errors->frames) ref.push_back(e.gt_position), est.push_back(e.est_position_aligned);
+      caption.push_back(fmt::format("ATE (Sim3) RMSE {:.4g} m, mean {:.4g} m; rotation mean {:.3g} deg; scale {:.4g}",
+                                    errors->ate_m.rmse, errors->ate_m.mean, errors->rot_deg.mean,
+                                    errors->alignment_result.gt_world_from_est_world.scale));
+    } else {
+      for (const Pose& p : traj.world_from_cam) est.push_back(p.t);
+      caption.push_back(gt ? "not aligned: " + eval_failure : "no ground truth: the estimate in its own frame");
+    }
+    WriteTopView(options.plot_path, ref, est, caption);
+  }
+}
+
+}  // namespace mcslam::apps

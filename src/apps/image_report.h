@@ -1,0 +1,54 @@
+#pragma once
+// The per-frame rows of a run on pixels and how they are written: frames.csv, and the helpers of report.json.
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "eval/trajectory_eval.h"
+#include "frontend/frontend.h"
+#include "slam/system.h"
+
+namespace mcslam::apps {
+
+// ---- per-frame bookkeeping -------------------------------------------------------------------------------
+
+struct FrameRow {
+  int64_t index = 0;
+  double stamp_s = 0;
+  std::string name;
+  bool skipped = false;
+  std::string error;  // why skipped
+  frontend::FrameStats fe;
+  int features = 0, lost_tracks = 0;
+  // Relocalisation in this frame: tried (after a lost or skipped frame), matches to map points, PnP inliers
+  // (0: no pose found).
+  bool reloc_tried = false;
+  int reloc_matches = 0, reloc_inliers = 0;
+  double reloc_ms = 0;
+  double decode_ms = 0, frame_ms = 0;
+  double backend_ms = 0;     // System::Process, wall time
+  bool before_init = false;  // the back end had no map when this frame came: its time is initialisation's
+};
+
+struct Stage {
+  std::vector<double> ms;
+  void Add(double v) {
+    if (v > 0 && std::isfinite(v)) ms.push_back(v);
+  }
+};
+
+// {"count", "median_ms", "mean_ms"} of a stage (null medians when it never ran).
+nlohmann::json StageJson(const Stage& s);
+// {"count", "rmse", "mean", "median", "max"}, null where not finite.
+nlohmann::json StatsJson(const eval::ErrorStats& s);
+// One line per row: the front end's counts and the back end's report of that frame (by index), and its
+// error against the ground truth when known.
+void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
+                    const std::vector<slam::FrameReport>& reports, const std::map<int64_t, size_t>& report_of_index,
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index);
+
+}  // namespace mcslam::apps
