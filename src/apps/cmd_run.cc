@@ -16,6 +16,7 @@
 #include "core/median.h"
 #include "apps/image_job.h"
 #include "apps/known_map_job.h"
+#include "apps/options_json.h"
 #include "apps/options.h"
 #include "apps/run_timing.h"
 #include "apps/slam_job.h"
@@ -140,6 +141,7 @@ void RunFullSlam(const RunArgs& a) {
                                  UpperMedian(ms), fps);
   nlohmann::json j = RunReportHead(a, "slam");
   j["options"]["samples_per_point"] = options.mapping.samples;
+  j["options"]["system"] = ToJson(options);  // every option: what the run did, from its report alone
   j["frames"] = res.reports.size();
   j["tracked"] = tracked;
   j["lost"] = lost;
@@ -243,6 +245,7 @@ void Run(const RunArgs& a) {
   std::string line = fmt::format("frames={} tracked={} lost={} keyframes={} pose_ms_median={:.3f} fps={:.1f}",
                                  results.size(), tracked + 1, lost, keyframes, UpperMedian(ms), fps);
   nlohmann::json j = RunReportHead(a, "known_map");
+  j["options"]["known_map"] = ToJson(options);  // every option: what the run did, from its report alone
   j["frames"] = results.size();
   j["tracked"] = tracked + 1;  // the first frame's pose is given
   j["lost"] = lost;

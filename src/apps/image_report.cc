@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "apps/image_run.h"
+#include "apps/options_json.h"
 #include "core/median.h"
 #include "io/ply.h"
 
@@ -146,6 +147,8 @@ void ImageRun::WriteReport() {
                   {"describe_async", fe_opts.describe_async},
                   {"start", options.start},
                   {"end", options.end}};
+  j["options"]["system"] = ToJson(sys_opts);  // every option: what the run did, from its report alone
+  j["options"]["frontend"] = ToJson(fe_opts);
   j["frames"] = frames_processed;
   j["frames_read"] = frames_read;
   j["skipped"] = sum.skipped;

@@ -178,6 +178,10 @@ TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
   // Measured: initialised at frame 9 from frames 0-9, so every frame has a pose.
   EXPECT_EQ(j["tracked"], 40) << r.output;
   EXPECT_EQ(j["lost"], 0);
+  // Every option of the System and of the front end, the flags given included.
+  EXPECT_EQ(j["options"]["system"]["tracker"]["hypotheses"], 65536) << j["options"].dump();
+  EXPECT_EQ(j["options"]["frontend"]["describe_async"], true) << j["options"].dump();
+  EXPECT_EQ(j["options"]["frontend"]["anchor_mismatch"], "auto") << j["options"].dump();
   const io::Trajectory est = io::ReadTum(out + "/trajectory.txt");
   EXPECT_EQ(est.size(), 40u);
   EXPECT_EQ(io::ReadKitti(out + "/trajectory_kitti.txt", out + "/trajectory_kitti_times.txt").size(), 40u);

@@ -43,6 +43,9 @@ TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
   EXPECT_EQ(j["mode"], "known_map");
   EXPECT_EQ(j["frames"], 40);
   EXPECT_EQ(j["options"]["backend"], "cpu");
+  // Every option of the mode, the flags given included.
+  EXPECT_EQ(j["options"]["known_map"]["tracker"]["hypotheses"], 65536) << j["options"].dump();
+  EXPECT_TRUE(j["options"]["known_map"]["smoother"].contains("alpha")) << j["options"].dump();
   // mcslam eval on the output: the paper's bounds hold on this short run too (2 cm, 1 degree).
   const auto e = RunMcslam("eval " + dir / "s/groundtruth.txt " + dir / "r/trajectory.txt --align none");
   ASSERT_EQ(e.exit_code, 0) << e.output;
@@ -198,6 +201,11 @@ TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   EXPECT_NE(csv.find("trans_err_m"), std::string::npos);
   EXPECT_NE(csv.find("initialised from frames"), std::string::npos);
   ExpectSaneRunTimes(r.output, dir / "r/report.json");
+  // Every option of the System, the flags given included.
+  const nlohmann::json options = testing::ReadJson(dir / "r/report.json")["options"]["system"];
+  EXPECT_EQ(options["tracker"]["hypotheses"], 65536) << options.dump();
+  EXPECT_EQ(options["init"]["method"], "8point") << options.dump();
+  EXPECT_EQ(options["mapping"]["window"], 12) << options.dump();
   const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
   EXPECT_EQ(j["mode"], "slam");
   EXPECT_EQ(j["tracked"], 60);

@@ -1,0 +1,108 @@
+#include "apps/options_json.h"
+
+#include <stdexcept>
+#include <string>
+
+#include <fmt/format.h>
+
+// Each options struct listed field by field, once: the same list writes and reads it. Enumerations by name.
+namespace mcslam::geometry {
+NLOHMANN_JSON_SERIALIZE_ENUM(EssentialMethod, {{EssentialMethod::kEightPoint, "8point"},
+                                               {EssentialMethod::kFivePointOpenCV, "5point"}})
+}  // namespace mcslam::geometry
+
+namespace mcslam::slam {
+NLOHMANN_JSON_SERIALIZE_ENUM(RandomMode, {{RandomMode::kTable, "table"}, {RandomMode::kFresh, "fresh"}})
+NLOHMANN_JSON_SERIALIZE_ENUM(PoseTrackerOptions::Pivot, {{PoseTrackerOptions::Pivot::kCentroid, "centroid"},
+                                                         {PoseTrackerOptions::Pivot::kOrigin, "origin"}})
+NLOHMANN_JSON_SERIALIZE_ENUM(PoseMethod, {{PoseMethod::kMonteCarlo, "mc"}, {PoseMethod::kPnp, "pnp"}})
+NLOHMANN_JSON_SERIALIZE_ENUM(StructureMethod, {{StructureMethod::kMonteCarlo, "mc"},
+                                               {StructureMethod::kBundleAdjustment, "ba"}})
+
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseTrackerOptions, hypotheses, seed, random, sigma_rot_deg,
+                                                sigma_rot_motion_scale, sigma_trans_floor_m, sigma_trans_scale,
+                                                inlier_threshold_px, max_distance_px, min_points, min_inliers,
+                                                min_inlier_ratio, keyframe_min_inlier_ratio, pivot, rounds, round_shrink)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_deg, min_common_features, min_inliers,
+                                                min_points, min_shared_fraction, min_count_floor, min_window_frames,
+                                                min_median_parallax_deg, max_relative_depth_noise, ambiguity_chi2,
+                                                method, ransac_threshold_px, refine_window, refine_huber_px,
+                                                settle_parallax_deg, settle_step, settle_max_frames,
+                                                pose_frames_before_reference)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames, min_parallax_deg,
+                                                max_relative_depth_noise, max_noise_parallax_deg, starving_inliers,
+                                                starving_parallax_deg, max_reprojection_px, retriangulate_after_frames,
+                                                history_frames, adjust, adjust_threshold_px, candidate_threshold_px,
+                                                samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, predict_frames)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,
+                                                ba_fixed_keyframes, tracker, init, mapping, smoother,
+                                                sigma_trans_floor_rel_depth, seed, relocalise_min_inliers,
+                                                rotation_only, rotation_only_min_tracks, rotation_only_min_ratio)
+}  // namespace mcslam::slam
+
+namespace mcslam::frontend {
+NLOHMANN_JSON_SERIALIZE_ENUM(FrontendOptions::AnchorMismatch, {{FrontendOptions::AnchorMismatch::kAuto, "auto"},
+                                                               {FrontendOptions::AnchorMismatch::kDrop, "drop"},
+                                                               {FrontendOptions::AnchorMismatch::kReanchor, "reanchor"}})
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(
+    FrontendOptions, max_features, cell_size_px, max_new_per_cell, quality_level, min_distance_px, block_size,
+    border_px, pyramid_levels, retry_pyramid_levels, window_px, jolt_recovery, jolt_min_shift_px,
+    jolt_min_failed_fraction, max_iterations, epsilon_px, min_eigen_threshold, max_forward_backward_px,
+    max_patch_error, track_border_px, anchor_every, anchor_patch_px, anchor_min_correlation, anchor_max_shift_px,
+    anchor_mismatch, anchor_auto_reanchor_fraction, anchor_max_scale_change, anchor_min_texture_ratio,
+    use_kalman_prediction, kalman_accel_sigma_px, kalman_measurement_sigma_px, init_velocity_radius_px,
+    descriptor_size_px, describe_async, descriptor_refresh_frames, remap_window_px, remap_max_candidates,
+    remap_max_distance, remap_ratio)
+}  // namespace mcslam::frontend
+
+namespace mcslam::apps {
+
+namespace {
+
+// Every field given must read back as given: nlohmann reads an enumeration's name that the tables above do not
+// know as its first value, and a number where a bool is expected as a bool; both are refused here, naming the field.
+void CheckReadBack(const nlohmann::json& given, const nlohmann::json& back, const std::string& path) {
+  for (const auto& [key, value] : given.items()) {
+    const std::string name = path.empty() ? key : path + "." + key;
+    if (!back.contains(key)) throw std::invalid_argument(fmt::format("{}: no such option", name));
+    if (value.is_object()) {
+      CheckReadBack(value, back[key], name);
+    } else if (back[key] != value) {
+      throw std::invalid_argument(fmt::format("{} = {}: not a valid value", name, value.dump()));
+    }
+  }
+}
+
+template <typename T>
+void Read(const nlohmann::json& j, T* options, const char* what) {
+  if (!j.is_object()) throw std::invalid_argument(fmt::format("{} options: an object is expected, got {}", what, j.dump()));
+  // The fields not given keep their values: what `options` holds, patched with `j` (the macros above would
+  // fill a missing field with its default instead).
+  nlohmann::json merged = *options;
+  merged.merge_patch(j);
+  T read = *options;
+  try {
+    from_json(merged, read);
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(fmt::format("{} options: {}", what, e.what()));
+  }
+  try {
+    CheckReadBack(j, nlohmann::json(read), "");
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("{} options: {}", what, e.what()));
+  }
+  *options = read;
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const slam::SystemOptions& options) { return options; }
+nlohmann::json ToJson(const frontend::FrontendOptions& options) { return options; }
+nlohmann::json ToJson(const slam::KnownMapOptions& options) {
+  return {{"tracker", options.tracker}, {"smoother", options.smoother}};
+}
+void FromJson(const nlohmann::json& j, slam::SystemOptions* options) { Read(j, options, "system"); }
+void FromJson(const nlohmann::json& j, frontend::FrontendOptions* options) { Read(j, options, "front end"); }
+
+}  // namespace mcslam::apps
