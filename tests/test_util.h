@@ -1,4 +1,5 @@
 #pragma once
+#include <algorithm>
 // Helpers shared by the tests: scratch folders and running the mcslam binary.
 #include <array>
 #include <cstdio>
@@ -79,6 +80,22 @@ inline int CountDataLines(const std::string& path) {
   while (std::getline(in, line))
     if (!line.empty() && line[0] != '#') ++n;
   return n;
+}
+
+// Lines of a CSV file (header first) whose number of comma-separated cells differs from the header's, as
+// "line N: K cells, the header has H"; empty when every line has the header's shape.
+inline std::vector<std::string> CsvShapeErrors(const std::string& path) {
+  std::istringstream in(ReadText(path));
+  std::string line;
+  std::vector<std::string> errors;
+  auto cells = [](const std::string& l) { return 1 + static_cast<int>(std::count(l.begin(), l.end(), ',')); };
+  if (!std::getline(in, line)) return {"no header"};
+  const int header = cells(line);
+  for (int n = 2; std::getline(in, line); ++n)
+    if (!line.empty() && cells(line) != header)
+      errors.push_back("line " + std::to_string(n) + ": " + std::to_string(cells(line)) + " cells, the header has " +
+                       std::to_string(header));
+  return errors;
 }
 
 // Folder of the real sequences: $MCSLAM_DATA, else ../shared/data beside the source tree. Empty when absent.

@@ -4,6 +4,7 @@
 // front end first (apps/image_job.h).
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <set>
 #include <string>
 #include <vector>
@@ -17,6 +18,7 @@
 #include "apps/image_job.h"
 #include "apps/known_map_job.h"
 #include "apps/options_json.h"
+#include "apps/run_report.h"
 #include "apps/options.h"
 #include "apps/run_timing.h"
 #include "apps/slam_job.h"
@@ -122,7 +124,19 @@ void RunFullSlam(const RunArgs& a) {
       spdlog::warn("no evaluation against the ground truth: {}", e.what());
     }
   }
-  WriteSlamFramesCsv((out / "frames.csv").string(), res.reports, err ? &*err : nullptr);
+  {
+    // frames.csv pairs errors with reports by frame index; the trajectory's poses are the posed reports in order.
+    std::map<int64_t, size_t> report_of_index;
+    std::map<int64_t, const eval::FrameError*> error_of_index;
+    std::vector<int64_t> posed;
+    for (size_t i = 0; i < res.reports.size(); ++i) {
+      report_of_index[res.reports[i].index] = i;
+      if (res.reports[i].has_pose) posed.push_back(res.reports[i].index);
+    }
+    if (err)
+      for (const eval::FrameError& e : err->frames) error_of_index[posed[e.est_index]] = &e;
+    WriteFramesCsv((out / "frames.csv").string(), res.reports, report_of_index, error_of_index, nullptr);
+  }
 
   int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0;
   std::vector<double> ms;

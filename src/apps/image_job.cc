@@ -15,7 +15,7 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/image_outputs.h"
-#include "apps/image_report.h"
+#include "apps/run_report.h"
 #include "apps/image_run.h"
 #include "apps/options.h"
 #include "apps/slam_job.h"
@@ -420,7 +420,7 @@ void ImageRun::WriteTrajectoryMapAndFrames() {
   std::map<int64_t, const eval::FrameError*> error_of_index;
   if (errors)
     for (const eval::FrameError& e : errors->frames) error_of_index[traj_frames[e.est_index]] = &e;
-  WriteFramesCsv((out / "frames.csv").string(), rows, reports, report_of_index, error_of_index);
+  WriteFramesCsv((out / "frames.csv").string(), reports, report_of_index, error_of_index, &rows);
 }
 
 

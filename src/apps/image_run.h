@@ -1,5 +1,5 @@
 #pragma once
-// The state of one run of the image job (image_job.cc), phase by phase; image_report.cc writes its report from
+// The state of one run of the image job (image_job.cc), phase by phase; run_report.cc writes its report from
 // it. Internal to apps.
 #include <cstdint>
 #include <map>
@@ -12,7 +12,7 @@
 
 #include "apps/image_job.h"
 #include "apps/image_outputs.h"
-#include "apps/image_report.h"
+#include "apps/run_report.h"
 #include "apps/run_timing.h"
 #include "apps/slam_job.h"
 #include "eval/trajectory_eval.h"

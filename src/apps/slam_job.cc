@@ -84,28 +84,5 @@ void WriteReportJson(const std::string& path, const nlohmann::json& report) {
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
 }
 
-void WriteSlamFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
-                        const eval::TrajectoryErrors* errors) {
-  std::map<double, const eval::FrameError*> err_of_stamp;
-  if (errors)
-    for (const eval::FrameError& e : errors->frames) err_of_stamp[e.stamp_s] = &e;
-  std::ofstream f(path);
-  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
-  f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
-       "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,note\n";
-  for (const slam::FrameReport& r : reports) {
-    std::string te, re;
-    if (auto it = err_of_stamp.find(r.stamp_s); r.has_pose && it != err_of_stamp.end())
-      te = fmt::format("{:.6g}", it->second->trans_err_m), re = fmt::format("{:.6g}", it->second->rot_err_deg);
-    std::string note = r.note;
-    for (char& c : note)
-      if (c == ',' || c == '\n') c = ';';
-    f << fmt::format("{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{}\n", r.index,
-                     r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
-                     r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px,
-                     r.track_ms, r.map_ms, r.adjust_ms, r.init_ms, te, re, note);
-  }
-  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
-}
 
 }  // namespace mcslam::apps

@@ -48,10 +48,4 @@ io::Trajectory ReportsToTrajectory(const std::vector<slam::FrameReport>& reports
 // Writes a run report (report.json) to `path`; throws naming the file when it cannot.
 void WriteReportJson(const std::string& path, const nlohmann::json& report);
 
-// frames.csv: index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,
-// reproj_mean_px,reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,note
-// (the error columns are empty without ground truth or for frames without a pose).
-void WriteSlamFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
-                        const eval::TrajectoryErrors* errors);
-
 }  // namespace mcslam::apps

@@ -230,6 +230,8 @@ TEST(CliImages, CorruptFrameIsSkippedAndCounted) {
   // The gap of one frame costs nothing: the others are all tracked (measured).
   EXPECT_EQ(j["tracked"], 39) << r.output;
   EXPECT_NE(ReadText(out + "/frames.csv").find(",skipped,"), std::string::npos);
+  // The skipped frame's line has every column too (it had one too few).
+  EXPECT_EQ(testing::CsvShapeErrors(out + "/frames.csv"), std::vector<std::string>{});
 }
 
 // The sequence's frames as a grey video at 30 fps.

@@ -200,6 +200,9 @@ TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 61);
   EXPECT_NE(csv.find("trans_err_m"), std::string::npos);
   EXPECT_NE(csv.find("initialised from frames"), std::string::npos);
+  // One frames.csv schema for every run that builds a map: the front end's columns are there, empty.
+  EXPECT_NE(csv.find(",fe_tracked,"), std::string::npos);
+  EXPECT_EQ(testing::CsvShapeErrors(dir / "r/frames.csv"), std::vector<std::string>{});
   ExpectSaneRunTimes(r.output, dir / "r/report.json");
   // Every option of the System, the flags given included.
   const nlohmann::json options = testing::ReadJson(dir / "r/report.json")["options"]["system"];

@@ -1,5 +1,5 @@
 #pragma once
-// The per-frame rows of a run on pixels and how they are written: frames.csv, and the helpers of report.json.
+// The per-frame rows of a run and how they are written: frames.csv, and the helpers of report.json.
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -45,10 +45,11 @@ struct Stage {
 nlohmann::json StageJson(const Stage& s);
 // {"count", "rmse", "mean", "median", "max"}, null where not finite.
 nlohmann::json StatsJson(const eval::ErrorStats& s);
-// One line per row: the front end's counts and the back end's report of that frame (by index), and its
-// error against the ground truth when known.
-void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
-                    const std::vector<slam::FrameReport>& reports, const std::map<int64_t, size_t>& report_of_index,
-                    const std::map<int64_t, const eval::FrameError*>& error_of_index);
+// frames.csv, one schema for every run that builds a map: per frame, the back end's report (by index) and its error
+// against the ground truth when known, then the front end's counts and times (`rows`; empty cells on a run from
+// observations, rows == nullptr: one line per report then), then the note.
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                    const std::map<int64_t, size_t>& report_of_index,
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>* rows);
 
 }  // namespace mcslam::apps

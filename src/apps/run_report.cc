@@ -1,4 +1,4 @@
-#include "apps/image_report.h"
+#include "apps/run_report.h"
 
 #include <algorithm>
 #include <cmath>
@@ -34,45 +34,81 @@ nlohmann::json StatsJson(const eval::ErrorStats& s) {
   return {{"count", s.count}, {"rmse", num(s.rmse)}, {"mean", num(s.mean)}, {"median", num(s.median)}, {"max", num(s.max)}};
 }
 
-void WriteFramesCsv(const std::string& path, const std::vector<FrameRow>& rows,
-                    const std::vector<slam::FrameReport>& reports, const std::map<int64_t, size_t>& report_of_index,
-                    const std::map<int64_t, const eval::FrameError*>& error_of_index) {
+namespace {
+
+// frames.csv's columns: the back end's, the front end's (empty on a run from observations), the note.
+constexpr const char* kBackEndColumns =
+    "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
+    "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg";
+constexpr const char* kFrontEndColumns =
+    "features,fe_tracked,fe_detected,"
+    "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
+    "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
+    "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
+    "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,"
+    "fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
+
+std::string Repeat(const std::string& cell, int n) {
+  std::string out;
+  for (int i = 0; i < n; ++i) out += cell;
+  return out;
+}
+
+std::string Clean(std::string s) {
+  for (char& c : s)
+    if (c == ',' || c == '\n' || c == '\r') c = ';';
+  return s;
+}
+
+std::string BackEndCells(const slam::FrameReport& r, const std::map<int64_t, const eval::FrameError*>& error_of_index) {
+  std::string te, re;
+  if (auto e = error_of_index.find(r.index); r.has_pose && e != error_of_index.end())
+    te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
+  return fmt::format("{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{}", r.index,
+                     r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
+                     r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px,
+                     r.track_ms, r.map_ms, r.adjust_ms, r.init_ms, te, re);
+}
+
+std::string FrontEndCells(const FrameRow& row) {
+  const frontend::FrameStats& s = row.fe;
+  return fmt::format(
+      "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
+      "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f}",
+      row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward, s.lost_patch_error,
+      s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered,
+      s.remap_requests, s.remapped, s.remap_refused_id, s.remap_outside, s.remap_no_candidate, s.remap_no_match,
+      s.remap_over_budget, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms,
+      s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
+}
+
+}  // namespace
+
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                    const std::map<int64_t, size_t>& report_of_index,
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>* rows) {
   std::ofstream f(path);
   if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
-  f << "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
-       "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,features,fe_tracked,fe_detected,"
-       "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
-       "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
-       "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-       "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,"
-       "fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms,note\n";
-  auto clean = [](std::string s) {
-    for (char& c : s)
-      if (c == ',' || c == '\n' || c == '\r') c = ';';
-    return s;
-  };
-  for (const FrameRow& row : rows) {
-    if (row.skipped) {
-      f << fmt::format("{},{:.9f},skipped,0,0,0,0,0,0,0,0,,,,,,,,,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,{:.3f},,,,,,,,,,,{:.3f},{}\n", row.index,
-                       row.stamp_s, row.decode_ms, row.frame_ms, clean(row.name + ": " + row.error));
-      continue;
+  f << kBackEndColumns << ',' << kFrontEndColumns << ",note\n";
+  if (!rows) {  // a run from observations: no front end
+    const std::string no_front_end(static_cast<size_t>(std::count(kFrontEndColumns, kFrontEndColumns + std::char_traits<char>::length(kFrontEndColumns), ',')), ',');
+    for (const slam::FrameReport& r : reports)
+      f << BackEndCells(r, error_of_index) << ',' << no_front_end << ',' << Clean(r.note) << '\n';
+  } else {
+    for (const FrameRow& row : *rows) {
+      if (row.skipped) {
+        // The counts 0, the times empty but the decoding's and the frame's; the note says why (the reader's
+        // message names the file; otherwise the name is added).
+        const std::string why = row.error.find(row.name) != std::string::npos ? row.error : row.name + ": " + row.error;
+        f << fmt::format("{},{:.9f},skipped,{}{}{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
+                         Repeat(",", 8), Repeat("0,", 23), row.decode_ms, Repeat(",", 10), row.frame_ms, Clean(why));
+        continue;
+      }
+      auto it = report_of_index.find(row.index);
+      if (it == report_of_index.end()) continue;  // interrupted between the front end and the back end
+      const slam::FrameReport& r = reports[it->second];
+      f << BackEndCells(r, error_of_index) << ',' << FrontEndCells(row) << ',' << Clean(r.note) << '\n';
     }
-    auto it = report_of_index.find(row.index);
-    if (it == report_of_index.end()) continue;  // interrupted between the front end and the back end
-    const slam::FrameReport& r = reports[it->second];
-    std::string te, re;
-    if (auto e = error_of_index.find(row.index); r.has_pose && e != error_of_index.end())
-      te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
-    const frontend::FrameStats& s = row.fe;
-    f << fmt::format(
-        "{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
-        "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{}\n",
-        r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored, r.inliers,
-        r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px, r.reproj_median_px, r.track_ms, r.map_ms,
-        r.adjust_ms, r.init_ms, te, re, row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward,
-        s.lost_patch_error, s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered, s.remap_requests, s.remapped, s.remap_refused_id,
-        s.remap_outside, s.remap_no_candidate, s.remap_no_match, s.remap_over_budget, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms,
-        s.describe_wait_ms, s.total_ms, row.frame_ms, clean(r.note));
   }
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
 }
