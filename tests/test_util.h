@@ -98,6 +98,32 @@ inline std::vector<std::string> CsvShapeErrors(const std::string& path) {
   return errors;
 }
 
+// The cells of the column named `name` of a CSV file, one per data line (empty when the header has no such column).
+inline std::vector<std::string> CsvColumn(const std::string& path, const std::string& name) {
+  std::istringstream in(ReadText(path));
+  auto split = [](const std::string& l) {
+    std::vector<std::string> c(1);
+    for (char ch : l) {
+      if (ch == ',') c.emplace_back();
+      else c.back().push_back(ch);
+    }
+    return c;
+  };
+  std::string line;
+  if (!std::getline(in, line)) return {};
+  const std::vector<std::string> header = split(line);
+  const auto col = std::find(header.begin(), header.end(), name);
+  if (col == header.end()) return {};
+  const size_t k = static_cast<size_t>(col - header.begin());
+  std::vector<std::string> out;
+  while (std::getline(in, line))
+    if (!line.empty()) {
+      const std::vector<std::string> c = split(line);
+      out.push_back(k < c.size() ? c[k] : std::string());
+    }
+  return out;
+}
+
 // Folder of the real sequences: $MCSLAM_DATA, else ../shared/data beside the source tree. Empty when absent.
 inline std::string DataDir() {
   if (const char* env = std::getenv("MCSLAM_DATA"); env && *env) return env;

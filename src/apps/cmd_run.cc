@@ -244,7 +244,28 @@ void Run(const RunArgs& a) {
   const io::Trajectory traj = ResultsToTrajectory(results, false);
   io::WriteTum((std::filesystem::path(a.out) / "trajectory.txt").string(), traj);
   io::WriteTum((std::filesystem::path(a.out) / "trajectory_smoothed.txt").string(), ResultsToTrajectory(results, true));
-  WriteFramesCsv((std::filesystem::path(a.out) / "frames.csv").string(), results);
+  // The map is the ground truth's, so the estimate is in its frame already: no alignment.
+  std::optional<eval::TrajectoryErrors> err;
+  if (!input.groundtruth.empty() && traj.size() >= 3) {
+    eval::EvalOptions eo;
+    eo.alignment = eval::Alignment::kNone;
+    err = eval::EvaluateTrajectory(input.groundtruth, traj, eo);
+  }
+  {
+    std::vector<slam::FrameReport> reports;
+    std::map<int64_t, size_t> report_of_index;
+    std::map<int64_t, const eval::FrameError*> error_of_index;
+    std::vector<int64_t> posed;
+    for (const slam::FrameResult& r : results) {
+      report_of_index[r.index] = reports.size();
+      reports.push_back(ToFrameReport(r));
+      if (r.estimate.tracked) posed.push_back(r.index);
+    }
+    if (err)
+      for (const eval::FrameError& e : err->frames) error_of_index[posed[e.est_index]] = &e;
+    WriteFramesCsv((std::filesystem::path(a.out) / "frames.csv").string(), reports, report_of_index, error_of_index,
+                   nullptr);
+  }
 
   int tracked = 0, lost = 0, keyframes = 0;
   std::vector<double> ms;
@@ -269,17 +290,13 @@ void Run(const RunArgs& a) {
   j["fps"] = fps;
   AddRunTimes(times, &j);
   j["ground_truth"] = nullptr;
-  if (!input.groundtruth.empty() && traj.size() >= 3) {
-    // The map is the ground truth's, so the estimate is in its frame already: no alignment.
-    eval::EvalOptions eo;
-    eo.alignment = eval::Alignment::kNone;
-    const auto err = eval::EvaluateTrajectory(input.groundtruth, traj, eo);
-    line += fmt::format(" trans_mean_m={:.6g} rot_mean_deg={:.6g} ate_rmse={:.6g}", err.ate_m.mean, err.rot_deg.mean,
-                        err.ate_m.rmse);
+  if (err) {
+    line += fmt::format(" trans_mean_m={:.6g} rot_mean_deg={:.6g} ate_rmse={:.6g}", err->ate_m.mean, err->rot_deg.mean,
+                        err->ate_m.rmse);
     j["ground_truth"] = {{"alignment", "none"},
-                         {"ate_rmse_m", err.ate_m.rmse},
-                         {"trans_mean_m", err.ate_m.mean},
-                         {"rot_mean_deg", err.rot_deg.mean}};
+                         {"ate_rmse_m", err->ate_m.rmse},
+                         {"trans_mean_m", err->ate_m.mean},
+                         {"rot_mean_deg", err->rot_deg.mean}};
   }
   line += RunTimesFields(times);
   WriteReportJson((std::filesystem::path(a.out) / "report.json").string(), j);

@@ -102,19 +102,26 @@ io::Trajectory ResultsToTrajectory(const std::vector<slam::FrameResult>& results
   return t;
 }
 
-void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameResult>& results) {
-  std::ofstream f(path);
-  if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
-  f << "index,stamp,tracked,given,keyframe,observed,scored,inliers,score,mean_residual_px,sigma_tx,sigma_ty,sigma_tz,"
-       "pose_ms,lost_reason\n";
-  for (const slam::FrameResult& r : results) {
-    const slam::PoseEstimate& e = r.estimate;
-    f << fmt::format("{},{:.9f},{},{},{},{},{},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.4f},{}\n", r.index, r.stamp_s,
-                     int(e.tracked), int(r.given), int(e.keyframe), r.observed_map_points, e.scored, e.inliers,
-                     e.score, e.mean_inlier_residual_px, e.sigma_t.x(), e.sigma_t.y(), e.sigma_t.z(), r.time_ms,
-                     e.lost_reason);
-  }
-  if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
+slam::FrameReport ToFrameReport(const slam::FrameResult& result) {
+  const slam::PoseEstimate& e = result.estimate;
+  slam::FrameReport r;
+  r.index = result.index;
+  r.stamp_s = result.stamp_s;
+  r.status = e.tracked ? slam::FrameStatus::kTracked : slam::FrameStatus::kLost;
+  r.has_pose = e.tracked;
+  r.cam_from_world = e.cam_from_world;
+  r.smoothed_cam_from_world = result.smoothed_cam_from_world;
+  r.keyframe = e.keyframe;
+  r.initialisation = result.given;
+  r.scored = e.scored;
+  r.inliers = e.inliers;
+  r.score = e.score;
+  r.sigma_t = e.sigma_t;
+  r.map_points = result.observed_map_points;
+  r.reproj_mean_px = e.mean_inlier_residual_px;
+  r.track_ms = result.time_ms;
+  r.note = result.given ? "pose given (the ground truth's)" : e.lost_reason;
+  return r;
 }
 
 }  // namespace mcslam::apps

@@ -10,6 +10,7 @@
 #include "io/trajectory_io.h"
 #include "sim/paper_scenario.h"
 #include "slam/known_map_tracking.h"
+#include "slam/system.h"
 
 namespace mcslam::apps {
 
@@ -42,8 +43,8 @@ std::vector<slam::FrameResult> RunKnownMap(const KnownMapInput& input, const sla
 
 // The tracked frames as a trajectory (world_from_cam); lost frames are left out, never invented.
 io::Trajectory ResultsToTrajectory(const std::vector<slam::FrameResult>& results, bool smoothed);
-// Per-frame CSV: index,stamp,tracked,given,keyframe,observed,scored,inliers,score,mean_residual_px,
-// sigma_tx,sigma_ty,sigma_tz,pose_ms,lost_reason.
-void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameResult>& results);
+// A pose step's result as a frame report of the SLAM system, for the one frames.csv schema: the given first pose
+// is the initialisation, the map points are those the frame observed, the note why it was lost.
+slam::FrameReport ToFrameReport(const slam::FrameResult& result);
 
 }  // namespace mcslam::apps

@@ -187,6 +187,10 @@ struct FrameReport {
   // (and the residual statistics) replace those of that frame's report; the rest of it stands.
   bool pose_update = false;
   int scored = 0, inliers = 0;
+  // The pose step's best score (the capped reprojection distances summed, px: Eq. 6) and the translation spread it sampled
+  // with (m): zero when the frame was not posed by the pose step.
+  double score = 0;
+  Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();
   int map_points = 0;           // active + lost
   int new_points = 0, adjusted = 0, removed = 0;
   double reproj_mean_px = 0;    // mean residual of the inlier observations of map points in this frame

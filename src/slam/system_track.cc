@@ -71,6 +71,8 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
     return r;
   }
   for (size_t i = 0; i < pts.size(); ++i) pts[i]->inlier = inl[i] != 0;
+  r.score = est.score;
+  r.sigma_t = est.sigma_t;
   fr.has_pose = true;
   fr.cam_from_world = est.cam_from_world;
   fr.pose_inliers = est.inliers;

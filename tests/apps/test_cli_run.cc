@@ -53,6 +53,21 @@ TEST(CliRun, KnownMapWritesTrajectoriesAndReportsAccuracy) {
   const double rot_mean = std::stod(e.output.substr(e.output.find("rot_mean_deg=") + 13));
   EXPECT_LT(ate_mean, 0.02);
   EXPECT_LT(rot_mean, 1.0);
+  // frames.csv: the schema of every run (front-end cells empty), a row per frame with its own error, whose
+  // mean is the evaluation's (cells printed to 6 significant digits: 1e-5 relative).
+  EXPECT_EQ(testing::CsvShapeErrors(dir / "r/frames.csv"), std::vector<std::string>{});
+  EXPECT_EQ(testing::CsvColumn(dir / "r/frames.csv", "fe_total_ms"), std::vector<std::string>(40));
+  const std::vector<std::string> status = testing::CsvColumn(dir / "r/frames.csv", "status");
+  const std::vector<std::string> terr = testing::CsvColumn(dir / "r/frames.csv", "trans_err_m");
+  ASSERT_EQ(terr.size(), 40u);
+  double sum = 0;
+  for (size_t i = 0; i < terr.size(); ++i) {
+    EXPECT_EQ(status[i], "tracked") << i;
+    ASSERT_FALSE(terr[i].empty()) << "frame " << i << " has no error";
+    sum += std::stod(terr[i]);
+  }
+  EXPECT_NEAR(sum / 40, ate_mean, 1e-5 * ate_mean);
+  EXPECT_EQ(testing::CsvColumn(dir / "r/frames.csv", "init")[0], "1");  // the given first pose
 }
 
 TEST(CliRun, SameSeedSameTrajectory) {
