@@ -278,7 +278,7 @@ void BenchSweep(SweepArgs a) {
 }  // namespace
 
 void RegisterBench(CLI::App& app) {
-  CLI::App* bench = app.add_subcommand("bench", "Benchmarks of the Monte Carlo kernels (figures are medians)");
+  CLI::App* bench = app.add_subcommand("bench", "Benchmarks: the Monte Carlo kernels, the pose estimator's accuracy, long runs (figures are medians)");
   bench->require_subcommand(1);
 
   auto pa = std::make_shared<PoseBenchArgs>();
@@ -333,6 +333,8 @@ void RegisterBench(CLI::App& app) {
   sa->pose.Add(sweep);
   AddBackendFlag(sweep, &sa->backend);
   sweep->callback([sa] { BenchSweep(*sa); });
+
+  RegisterBenchSoak(bench);
 }
 
 }  // namespace mcslam::apps
