@@ -63,6 +63,12 @@ PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& 
   table_ = compute::NormalTable(options_.hypotheses, options_.seed, /*stream=*/1);
 }
 
+void PoseTracker::SetTranslationFloor(double sigma_trans_floor_m) {
+  if (!(sigma_trans_floor_m > 0))
+    throw std::invalid_argument(fmt::format("pose tracker: translation floor must be > 0, got {}", sigma_trans_floor_m));
+  options_.sigma_trans_floor_m = sigma_trans_floor_m;
+}
+
 int PoseTracker::ClassifyInliers(const Pose& cam_from_world, const std::vector<PointObservation>& obs,
                                  std::vector<double>* residuals, std::vector<uint8_t>* inliers) const {
   residuals->assign(obs.size(), 0.0);

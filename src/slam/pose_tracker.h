@@ -101,6 +101,10 @@ class PoseTracker {
   Eigen::Vector3d LinearisedTranslation(const Pose& prev_cam_from_world,
                                         const std::vector<PointObservation>& observations) const;
 
+  // The least translation spread (m), options().sigma_trans_floor_m: a System sets it once the map's scale is
+  // known. Throws std::invalid_argument unless > 0.
+  void SetTranslationFloor(double sigma_trans_floor_m);
+
   const PoseTrackerOptions& options() const { return options_; }
   compute::PoseKernel& kernel() { return *kernel_; }
 

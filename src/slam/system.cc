@@ -123,12 +123,14 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
       ideal_(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
       focal_px_(0.5 * (camera.fx + camera.fy)),
       options_(options),
-      pose_kernel_(std::move(pose_kernel)),
       point_kernel_(std::move(point_kernel)),
       smoother_(options.smoother) {
+  options_.tracker.seed = options_.seed;  // one seed for every draw of the System
   camera_.Check();
   options_.Check();
-  if (!pose_kernel_ || !point_kernel_) throw std::invalid_argument("system: compute kernels missing");
+  if (!pose_kernel || !point_kernel_) throw std::invalid_argument("system: compute kernels missing");
+  // The pose step (§5) exists from the start; its translation floor is set when the map's scale is known.
+  tracker_ = std::make_unique<PoseTracker>(ideal_, options_.tracker, std::move(pose_kernel));
   point_normals_ = compute::NormalTable(options_.mapping.samples, options_.seed, /*stream=*/2);
 }
 

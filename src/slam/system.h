@@ -134,6 +134,8 @@ struct SystemOptions {
   StructureMethod structure_method = StructureMethod::kMonteCarlo;
   int ba_iterations = 10;    // Levenberg-Marquardt iteration cap of the local bundle adjustment
   int ba_fixed_keyframes = 2;  // the oldest keyframes of the window held fixed (gauge, including scale)
+  // The pose step's options; its seed is `seed` below and its sigma_trans_floor_m comes from
+  // sigma_trans_floor_rel_depth at initialisation (what these two fields say here is not used).
   PoseTrackerOptions tracker;
   InitOptions init;
   MappingOptions mapping;
@@ -141,6 +143,7 @@ struct SystemOptions {
   // The tracker's translation-spread floor, as a fraction of the median scene depth at initialisation
   // (the map's scale is arbitrary, so an absolute floor would mean nothing).
   double sigma_trans_floor_rel_depth = 0.0007;
+  // Every random draw of the System: the pose step's table, the point adjustment's, the initialisation's RANSAC.
   uint64_t seed = 1;
   // Relocalisation (System::Relocalise): a pose is accepted when at least this many of the matches agree
   // with it (RANSAC PnP, the tracker's inlier threshold).
@@ -295,9 +298,8 @@ class System {
   PinholeCamera ideal_;  // same intrinsics, no distortion: observations are undistorted on arrival
   double focal_px_;      // mean focal length: converts pixel thresholds to normalised units
   SystemOptions options_;
-  std::unique_ptr<compute::PoseKernel> pose_kernel_;
   std::unique_ptr<compute::PointKernel> point_kernel_;
-  std::unique_ptr<PoseTracker> tracker_;  // made at initialisation, when the map's scale is known
+  std::unique_ptr<PoseTracker> tracker_;  // from construction; its translation floor set at initialisation
   compute::NormalTable point_normals_;
   PoseSmoother smoother_;
   std::function<std::optional<double>(double, double)> oracle_;

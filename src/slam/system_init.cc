@@ -522,9 +522,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
   MarkSeen(cur_slot);
   RefreshInlierFlags(cur_slot);
-  PoseTrackerOptions topts = options_.tracker;
-  topts.sigma_trans_floor_m = options_.sigma_trans_floor_rel_depth * UpperMedian(depths);
-  tracker_ = std::make_unique<PoseTracker>(ideal_, topts, std::move(pose_kernel_));
+  tracker_->SetTranslationFloor(options_.sigma_trans_floor_rel_depth * UpperMedian(depths));
   initialised_ = true;
   init_min_points_ = need_points;
   posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
