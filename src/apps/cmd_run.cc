@@ -4,6 +4,8 @@
 // front end first (apps/image_job.h).
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <optional>
 #include <map>
 #include <set>
 #include <string>
@@ -39,6 +41,7 @@ struct RunArgs {
   slam::SystemOptions system;
   double smooth_alpha = 0.5;
   ImageJobOptions image;
+  std::string options_from;  // an earlier run's report.json
   // Flags that act only in some modes: those of the map building (no effect with --known-map) and those of the
   // front end and the pixel outputs (no effect on a folder of observations). Given where they do nothing, they
   // are an error naming them, not silently ignored.
@@ -85,8 +88,42 @@ slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   return options;
 }
 
-void RunFullSlam(const RunArgs& a) {
-  const slam::SystemOptions options = ResolveSystemOptions(a);
+// --options-from: the report.json of an earlier run, checked to hold its System's options.
+nlohmann::json ReadOptionsReport(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (ec || st.type() == std::filesystem::file_type::not_found)
+    throw std::invalid_argument(fmt::format("--options-from {}: the file does not exist", path));
+  if (st.type() != std::filesystem::file_type::regular)
+    throw std::invalid_argument(fmt::format("--options-from {}: not a regular file", path));
+  std::ifstream f(path);
+  if (!f) throw std::invalid_argument(fmt::format("--options-from {}: cannot open it", path));
+  nlohmann::json j = nlohmann::json::parse(f, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) throw std::invalid_argument(fmt::format("--options-from {}: not JSON", path));
+  if (!j.is_object() || !j.contains("options") || !j["options"].is_object() || !j["options"].contains("system") ||
+      !j["options"]["system"].is_object())
+    throw std::invalid_argument(fmt::format(
+        "--options-from {}: no options.system in it (the report.json of a `mcslam run` that built a map)", path));
+  return j;
+}
+
+// The run's System options: the flags', or with --options-from the earlier run's with the flags that change an
+// option from its default on top.
+slam::SystemOptions SystemOptionsFor(const RunArgs& a, const nlohmann::json* report) {
+  const slam::SystemOptions given = ResolveSystemOptions(a);
+  if (!report) return given;
+  const slam::SystemOptions defaults = ResolveSystemOptions(RunArgs{});
+  slam::SystemOptions out = defaults;
+  try {
+    FromJson(OverlayChanges((*report)["options"]["system"], ToJson(defaults), ToJson(given)), &out);
+    out.Check();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+  }
+  return out;
+}
+
+void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   auto pose_kernel = MakePoseKernelFor(a.backend);
   auto point_kernel = MakePointKernelFor(a.backend);
   const SequenceInput input = LoadSequenceInput(a.input);
@@ -205,17 +242,39 @@ void RunFullSlam(const RunArgs& a) {
 }
 
 void Run(const RunArgs& a) {
+  std::optional<nlohmann::json> report;
+  if (!a.options_from.empty()) {
+    if (a.known_map)
+      throw std::invalid_argument("--options-from: a --known-map run takes its options from the command line only");
+    report = ReadOptionsReport(a.options_from);
+    spdlog::info("options from {} (flags given here on top)", a.options_from);
+  }
+  const nlohmann::json* rep = report ? &*report : nullptr;
   if (!a.known_map && IsImageInput(a.input, a.image)) {
     ImageJobOptions image = a.image;
     image.gt_scale = a.gt_scale;
-    RunImageJob(a.input, a.out, ResolveSystemOptions(a), a.backend, image);
+    if (rep && (*rep)["options"].contains("frontend")) {
+      const frontend::FrontendOptions defaults = ImageJobOptions{}.frontend;
+      frontend::FrontendOptions fe = defaults;
+      try {
+        FromJson(OverlayChanges((*rep)["options"]["frontend"], ToJson(defaults), ToJson(image.frontend)), &fe);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+      }
+      image.frontend = fe;
+    }
+    if (rep && image.relocalise == ImageJobOptions{}.relocalise) {
+      const nlohmann::json& r = (*rep).value("relocalisation", nlohmann::json::object());
+      if (r.is_object() && r.contains("enabled") && r["enabled"].is_boolean()) image.relocalise = r["enabled"].get<bool>();
+    }
+    RunImageJob(a.input, a.out, SystemOptionsFor(a, rep), a.backend, image);
     return;
   }
   RefuseFlagsWithoutEffect(a.image_flags, fmt::format("on a folder of observations ({}/observations.txt: features "
                                                       "already tracked, its own camera and ground truth; to run on its "
                                                       "rendered images instead, add --dataset synthetic)",
                                                       a.input));
-  if (!a.known_map) return RunFullSlam(a);
+  if (!a.known_map) return RunFullSlam(a, SystemOptionsFor(a, rep));
   RefuseFlagsWithoutEffect(a.mapping_flags, "with --known-map (the map is given: nothing is initialised or mapped)");
   slam::KnownMapOptions options;
   options.tracker = a.pose.Resolve();
@@ -391,6 +450,9 @@ void RegisterRun(CLI::App& app) {
       ->capture_default_str();
   args->pose.Add(cmd);
   AddBackendFlag(cmd, &args->backend);
+  cmd->add_option("--options-from", args->options_from,
+                  "Take every option from an earlier run's report.json (its System's and front end's); flags given "
+                  "here that change an option from its default apply on top");
   const size_t image_from = cmd->get_options().size();
   AddImageJobFlags(cmd, &args->image);
   args->image_flags = OptionsSince(cmd, image_from);

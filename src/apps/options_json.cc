@@ -105,4 +105,17 @@ nlohmann::json ToJson(const slam::KnownMapOptions& options) {
 void FromJson(const nlohmann::json& j, slam::SystemOptions* options) { Read(j, options, "system"); }
 void FromJson(const nlohmann::json& j, frontend::FrontendOptions* options) { Read(j, options, "front end"); }
 
+nlohmann::json OverlayChanges(nlohmann::json base, const nlohmann::json& defaults, const nlohmann::json& given) {
+  if (!given.is_object()) return given != defaults ? given : base;
+  if (!base.is_object()) base = nlohmann::json::object();
+  for (const auto& [key, value] : given.items()) {
+    const nlohmann::json d = defaults.is_object() && defaults.contains(key) ? defaults[key] : nlohmann::json();
+    if (value.is_object())
+      base[key] = OverlayChanges(base.contains(key) ? base[key] : nlohmann::json::object(), d, value);
+    else if (value != d)
+      base[key] = value;
+  }
+  return base;
+}
+
 }  // namespace mcslam::apps

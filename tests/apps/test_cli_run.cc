@@ -344,6 +344,51 @@ TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
   EXPECT_LT(without.worst_m, 0.05);
 }
 
+// A run reproduced from its report: --options-from takes every option of an earlier run's report.json, and the
+// flags given that change an option from its default go on top.
+TEST(CliRun, OptionsFromAReportReproduceTheRun) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 40 --noise 1 --out " + dir / "s").exit_code, 0);
+  ASSERT_EQ(RunMcslam("run " + dir / "s --out " + dir / "a --seed 3 --hypotheses 16384 --samples 1024 --window 8")
+                .exit_code,
+            0);
+  const auto b = RunMcslam("run " + dir / "s --out " + dir / "b --options-from " + dir / "a/report.json");
+  ASSERT_EQ(b.exit_code, 0) << b.output;
+  EXPECT_EQ(ReadText(dir / "b/trajectory.txt"), ReadText(dir / "a/trajectory.txt"));
+  const nlohmann::json ja = testing::ReadJson(dir / "a/report.json"), jb = testing::ReadJson(dir / "b/report.json");
+  EXPECT_EQ(jb["options"]["system"], ja["options"]["system"]);
+  // A flag on top: the seed changes, the rest is the report's.
+  ASSERT_EQ(RunMcslam("run " + dir / "s --out " + dir / "c --seed 4 --options-from " + dir / "a/report.json").exit_code,
+            0);
+  const nlohmann::json jc = testing::ReadJson(dir / "c/report.json")["options"]["system"];
+  EXPECT_EQ(jc["seed"], 4);
+  EXPECT_EQ(jc["tracker"]["hypotheses"], 16384);
+  EXPECT_EQ(jc["mapping"]["samples"], 1024);
+  EXPECT_EQ(jc["mapping"]["window"], 8);
+  // Images: the front end's options and relocalisation come back too.
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 30 --render --out " + dir / "r").exit_code, 0);
+  const std::string images = "run " + dir / "r --dataset synthetic --out ";
+  ASSERT_EQ(RunMcslam(images + dir / "ia --max-features 150 --hypotheses 16384 --no-relocalise").exit_code, 0);
+  ASSERT_EQ(RunMcslam(images + dir / "ib --options-from " + dir / "ia/report.json").exit_code, 0);
+  EXPECT_EQ(ReadText(dir / "ib/trajectory.txt"), ReadText(dir / "ia/trajectory.txt"));
+  const nlohmann::json ib = testing::ReadJson(dir / "ib/report.json");
+  EXPECT_EQ(ib["options"]["frontend"]["max_features"], 150);
+  EXPECT_EQ(ib["relocalisation"]["enabled"], false);
+  // What is not a report with options is refused, naming the file.
+  testing::WriteText(dir / "empty.json", "{}");
+  testing::WriteText(dir / "text.json", "not json");
+  for (const auto& [file, needle] : std::vector<std::pair<std::string, std::string>>{
+           {dir / "missing.json", "the file does not exist"}, {dir / "empty.json", "no options.system"},
+           {dir / "text.json", "not JSON"}, {dir / "s", "not a regular file"}}) {
+    const auto r = RunMcslam("run " + dir / "s --out " + dir / "x --options-from " + file);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("--options-from " + file + ": " + needle), std::string::npos) << r.output;
+  }
+  const auto km = RunMcslam("run " + dir / "s --known-map --out " + dir / "x --options-from " + dir / "a/report.json");
+  EXPECT_EQ(km.exit_code, 1);
+  EXPECT_NE(km.output.find("--options-from"), std::string::npos) << km.output;
+}
+
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {
   const auto r = RunMcslam("bench pose --hypotheses 4096 --points 50 --repeats 3");
   ASSERT_EQ(r.exit_code, 0) << r.output;

@@ -82,3 +82,30 @@ TEST(OptionsJson, BadValuesAreRefusedNamingTheField) {
 
 }  // namespace
 }  // namespace mcslam::apps
+
+namespace mcslam::apps {
+namespace {
+
+// --options-from's merge: the report's values, except where this command line changed an option from its default.
+TEST(OptionsJson, OverlayChangesKeepsTheBaseWhereNothingWasChanged) {
+  const nlohmann::json defaults = {{"seed", 1}, {"tracker", {{"hypotheses", 262144}, {"rounds", 3}}}, {"name", "mc"}};
+  const nlohmann::json base = {{"seed", 3}, {"tracker", {{"hypotheses", 16384}, {"rounds", 3}}}, {"name", "pnp"}};
+  nlohmann::json given = defaults;
+  EXPECT_EQ(OverlayChanges(base, defaults, given), base);  // no flag given: the report as it was
+  given["seed"] = 4;
+  given["tracker"]["rounds"] = 1;
+  const nlohmann::json out = OverlayChanges(base, defaults, given);
+  EXPECT_EQ(out["seed"], 4);
+  EXPECT_EQ(out["tracker"]["rounds"], 1);
+  EXPECT_EQ(out["tracker"]["hypotheses"], 16384);  // the report's, untouched beside a changed sibling
+  EXPECT_EQ(out["name"], "pnp");
+  // A field the report lacks (an older report) takes the command line's value when changed, else stays absent.
+  const nlohmann::json old_report = {{"seed", 3}};
+  const nlohmann::json merged = OverlayChanges(old_report, defaults, given);
+  EXPECT_EQ(merged["tracker"]["rounds"], 1);
+  EXPECT_FALSE(merged["tracker"].contains("hypotheses"));
+  EXPECT_FALSE(merged.contains("name"));
+}
+
+}  // namespace
+}  // namespace mcslam::apps
