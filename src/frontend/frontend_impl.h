@@ -1,0 +1,223 @@
+#pragma once
+// Internal to the front end (frontend.cc, frontend_track.cc, frontend_detect.cc): the state behind Frontend and the
+// helpers its stages share. Not part of the front end's API.
+#include "core/median.h"
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <utility>
+#include "frontend/kalman.h"
+#include "frontend/patch_align.h"
+#include "frontend/sift_describer.h"
+#include "frontend/frontend.h"
+
+namespace mcslam::frontend {
+namespace detail {
+
+
+using Clock = std::chrono::steady_clock;
+
+inline double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+// Velocity uncertainty of a new track: small when its neighbours tell how the image moves there.
+constexpr double kVelocitySigmaFromNeighboursPx = 3.0;
+constexpr double kVelocitySigmaUnknownPx = 10.0;
+
+inline std::string TypeName(int type) {
+  const int depth = CV_MAT_DEPTH(type), channels = CV_MAT_CN(type);
+  static constexpr const char* kDepths[] = {"8U", "8S", "16U", "16S", "32S", "32F", "64F", "16F"};
+  return fmt::format("CV_{}C{}", depth >= 0 && depth < 8 ? kDepths[depth] : "?", channels);
+}
+
+// 8-bit gray copy of the caller's frame (always a fresh buffer: the description task may still read the
+// previous one, and the caller may reuse its own).
+inline cv::Mat ToGray8(const cv::Mat& image, int64_t index) {
+  if (image.empty()) throw std::invalid_argument(fmt::format("frame {}: empty image", index));
+  cv::Mat img8;
+  if (image.depth() == CV_8U) {
+    img8 = image;
+  } else if (image.depth() == CV_16U) {
+    image.convertTo(img8, CV_8U, 1.0 / 256.0);
+  } else {
+    throw std::invalid_argument(
+        fmt::format("frame {}: unsupported pixel type {} (expected 8- or 16-bit gray, BGR or BGRA)", index,
+                    TypeName(image.type())));
+  }
+  cv::Mat gray;
+  switch (img8.channels()) {
+    case 1:
+      gray = img8.clone();
+      break;
+    case 3:
+      cv::cvtColor(img8, gray, cv::COLOR_BGR2GRAY);
+      break;
+    case 4:
+      cv::cvtColor(img8, gray, cv::COLOR_BGRA2GRAY);
+      break;
+    default:
+      throw std::invalid_argument(fmt::format("frame {}: unsupported pixel type {} (expected 1, 3 or 4 channels)",
+                                              index, TypeName(image.type())));
+  }
+  return gray;
+}
+
+inline Eigen::Vector2d ToEigen(const cv::Point2f& p) { return {p.x, p.y}; }
+
+struct Track {
+  int64_t id = 0;
+  cv::Point2f uv;
+  ConstantVelocityKalman kf;
+  int age = 0;
+  bool remapped = false;
+  std::optional<Descriptor> descriptor;
+  int described_at_age = 0;  // the track's age when `descriptor` was taken
+  // The patch the track was born with and the affine warp from patch offsets to image offsets found at the
+  // last alignment (linear part only; the translation follows the track).
+  AffinePatch anchor;
+  cv::Matx22f anchor_linear = cv::Matx22f::eye();
+};
+
+enum class AnchorOutcome : uint8_t { kNotAligned, kKept, kReanchor, kMismatch };
+
+// Aligns a track's birth patch with `gray` from `uv` (where LK put it). On success writes the aligned centre
+// and the warp's linear part.
+inline AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, const cv::Point2f& uv,
+                              const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
+  const AffinePatch::Result r = anchor.Align(gray, uv, *linear, 50, 0.001f);
+  // Too near the edge to align: the track keeps its LK position this frame.
+  if (!r.inside) return AnchorOutcome::kNotAligned;
+  // A mirrored warp (negative determinant) is no view of the same surface.
+  if (r.left_image || !(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px) ||
+      !(cv::determinant(r.linear) > 0))
+    return AnchorOutcome::kMismatch;
+  *aligned = r.centre;
+  *linear = r.linear;
+  // Singular values of the linear part: how much the patch grew, shrank or was sheared since birth.
+  cv::Vec2f w;
+  cv::Matx22f u, vt;
+  cv::SVD::compute(r.linear, w, u, vt);
+  const double smax = std::max(w[0], w[1]), smin = std::min(w[0], w[1]);
+  const double k = o.anchor_max_scale_change;
+  return (smax > k || smin < 1.0 / k || smax > k * smin) ? AnchorOutcome::kReanchor : AnchorOutcome::kKept;
+}
+
+// The patch a track is monitored with from here on; empty (unmonitored) when it does not fit in the image or
+// holds no more than an edge.
+inline AffinePatch MonitorPatch(const cv::Mat& gray, const cv::Point2f& uv, const FrontendOptions& o) {
+  AffinePatch patch(gray, uv, o.anchor_patch_px);
+  if (!patch.empty() && patch.texture_ratio() < o.anchor_min_texture_ratio) return {};
+  return patch;
+}
+
+struct Candidate {
+  cv::Point2f uv;
+  float response = 0;
+  int cell = 0;
+};
+
+
+}  // namespace detail
+
+using namespace detail;  // the stages' own helpers, in the three files of the front end only
+
+// ---- Impl -----------------------------------------------------------------------------------------------
+
+struct Frontend::Impl {
+  explicit Impl(const FrontendOptions& o)
+      : options(o), describer(o.descriptor_size_px), task_describer(o.descriptor_size_px) {}
+
+  FrontendOptions options;
+  SiftDescriber describer;       // used on the caller's thread (remapping, synchronous description)
+  SiftDescriber task_describer;  // used by the description task only
+  std::vector<Track> tracks;
+  int64_t next_id = 0;
+  cv::Size size;  // of the frames since the last Reset; empty before the first
+  std::vector<cv::Mat> prev_pyramid;
+
+  // Description of the tracks born in the last frame (indices into `tracks`, which does not change until
+  // the task is joined).
+  tbb::task_group task_group;
+  bool pending = false;
+  std::vector<size_t> pending_tracks;
+  std::vector<Descriptor> pending_descriptors;
+  std::vector<char> pending_ok;
+  double pending_ms = 0;
+
+  // Scratch kept between frames to avoid reallocating.
+  cv::Mat eig, eig_dilated, blocked, hann;
+
+  double JoinDescription() {
+    if (!pending) return 0.0;
+    const auto t0 = Clock::now();
+    task_group.wait();
+    for (size_t k = 0; k < pending_tracks.size(); ++k)
+      if (pending_ok[k]) {
+        Track& t = tracks[pending_tracks[k]];
+        t.descriptor = pending_descriptors[k];
+        t.described_at_age = t.age;
+      }
+    pending = false;
+    pending_tracks.clear();
+    return MsSince(t0);
+  }
+
+  // Describes tracks[indices] from `gray`, now or on the task.
+  void StartDescription(const cv::Mat& gray, std::vector<size_t> indices, FrameStats* stats) {
+    if (indices.empty()) return;
+    std::vector<cv::Point2f> points;
+    points.reserve(indices.size());
+    for (size_t i : indices) points.push_back(tracks[i].uv);
+    pending_tracks = std::move(indices);
+    pending_descriptors.assign(points.size(), Descriptor{});
+    pending_ok.assign(points.size(), 0);
+    pending = true;
+    auto work = [this, gray, points = std::move(points)](const SiftDescriber& d) {
+      const auto t0 = Clock::now();
+      // A track without a descriptor simply cannot be remapped; nothing else changes.
+      d.DescribeAll(gray, points, &pending_descriptors, &pending_ok);
+      pending_ms = MsSince(t0);
+    };
+    if (options.describe_async) {
+      task_group.run([work, this] { work(task_describer); });
+    } else {
+      work(describer);
+      JoinDescription();
+      stats->describe_ms = pending_ms;
+    }
+  }
+
+  // Median velocity of the tracks near `uv` (carried tracks only), with how sure it is.
+  std::pair<Eigen::Vector2d, double> InitialVelocity(const cv::Point2f& uv, size_t n_carried) const {
+    const double r2 = options.init_velocity_radius_px * options.init_velocity_radius_px;
+    std::vector<double> vu, vv;
+    if (r2 > 0) {
+      for (size_t i = 0; i < n_carried; ++i) {
+        const cv::Point2f d = tracks[i].uv - uv;
+        if (tracks[i].age > 0 && d.x * d.x + d.y * d.y <= r2) {
+          vu.push_back(tracks[i].kf.velocity_px().x());
+          vv.push_back(tracks[i].kf.velocity_px().y());
+        }
+      }
+    }
+    if (vu.empty()) return {Eigen::Vector2d::Zero(), kVelocitySigmaUnknownPx};
+    return {Eigen::Vector2d(UpperMedian(vu), UpperMedian(vv)), kVelocitySigmaFromNeighboursPx};
+  }
+
+  void TrackFeatures(const cv::Mat& gray, const std::vector<cv::Mat>& pyramid, FrameResult* result);
+  void DetectAndRemap(const cv::Mat& gray, std::span<const RemapRequest> remap, FrameResult* result);
+};
+
+
+}  // namespace mcslam::frontend
