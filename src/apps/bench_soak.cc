@@ -41,12 +41,11 @@ struct SoakArgs {
   std::string csv;
 };
 
-// A field of /proc/self/status in MiB ("VmRSS:", "VmHWM:"); nullopt where the kernel has no such file.
-std::optional<double> ProcStatusMiB(const std::string& field) {
-  std::ifstream f("/proc/self/status");
-  for (std::string line; std::getline(f, line);)
-    if (line.rfind(field, 0) == 0) return std::stod(line.substr(field.size())) / 1024.0;  // kB
-  return std::nullopt;
+// A field of /proc/self/status ("VmRSS:", "VmHWM:", in kB) in MiB; nullopt where the kernel has no such file.
+std::optional<double> ProcStatusMiB(const char* field) {
+  const std::optional<uint64_t> kb = ReadNumberFile("/proc/self/status", field);
+  if (!kb) return std::nullopt;
+  return static_cast<double>(*kb) / 1024.0;
 }
 
 double Percentile(std::vector<double> v, double q) {

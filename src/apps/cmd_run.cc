@@ -123,6 +123,30 @@ slam::SystemOptions SystemOptionsFor(const RunArgs& a, const nlohmann::json* rep
   return out;
 }
 
+// The image job's options: the flags', or with --options-from the earlier run's front end and relocalisation with
+// the flags that change them from their defaults on top.
+ImageJobOptions ImageOptionsFor(const RunArgs& a, const nlohmann::json* report) {
+  ImageJobOptions image = a.image;
+  image.gt_scale = a.gt_scale;
+  if (!report) return image;
+  const ImageJobOptions defaults;
+  if ((*report)["options"].contains("frontend")) {
+    frontend::FrontendOptions fe = defaults.frontend;
+    try {
+      FromJson(OverlayChanges((*report)["options"]["frontend"], ToJson(defaults.frontend), ToJson(image.frontend)),
+               &fe);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+    }
+    image.frontend = fe;
+  }
+  const nlohmann::json reloc = report->value("relocalisation", nlohmann::json::object());
+  if (image.relocalise == defaults.relocalise && reloc.is_object() && reloc.contains("enabled") &&
+      reloc["enabled"].is_boolean())
+    image.relocalise = reloc["enabled"].get<bool>();
+  return image;
+}
+
 void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   auto pose_kernel = MakePoseKernelFor(a.backend);
   auto point_kernel = MakePointKernelFor(a.backend);
@@ -161,19 +185,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
       spdlog::warn("no evaluation against the ground truth: {}", e.what());
     }
   }
-  {
-    // frames.csv pairs errors with reports by frame index; the trajectory's poses are the posed reports in order.
-    std::map<int64_t, size_t> report_of_index;
-    std::map<int64_t, const eval::FrameError*> error_of_index;
-    std::vector<int64_t> posed;
-    for (size_t i = 0; i < res.reports.size(); ++i) {
-      report_of_index[res.reports[i].index] = i;
-      if (res.reports[i].has_pose) posed.push_back(res.reports[i].index);
-    }
-    if (err)
-      for (const eval::FrameError& e : err->frames) error_of_index[posed[e.est_index]] = &e;
-    WriteFramesCsv((out / "frames.csv").string(), res.reports, report_of_index, error_of_index, nullptr);
-  }
+  WriteFramesCsv((out / "frames.csv").string(), res.reports, err);
 
   int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0;
   std::vector<double> ms;
@@ -251,23 +263,7 @@ void Run(const RunArgs& a) {
   }
   const nlohmann::json* rep = report ? &*report : nullptr;
   if (!a.known_map && IsImageInput(a.input, a.image)) {
-    ImageJobOptions image = a.image;
-    image.gt_scale = a.gt_scale;
-    if (rep && (*rep)["options"].contains("frontend")) {
-      const frontend::FrontendOptions defaults = ImageJobOptions{}.frontend;
-      frontend::FrontendOptions fe = defaults;
-      try {
-        FromJson(OverlayChanges((*rep)["options"]["frontend"], ToJson(defaults), ToJson(image.frontend)), &fe);
-      } catch (const std::invalid_argument& e) {
-        throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
-      }
-      image.frontend = fe;
-    }
-    if (rep && image.relocalise == ImageJobOptions{}.relocalise) {
-      const nlohmann::json& r = (*rep).value("relocalisation", nlohmann::json::object());
-      if (r.is_object() && r.contains("enabled") && r["enabled"].is_boolean()) image.relocalise = r["enabled"].get<bool>();
-    }
-    RunImageJob(a.input, a.out, SystemOptionsFor(a, rep), a.backend, image);
+    RunImageJob(a.input, a.out, SystemOptionsFor(a, rep), a.backend, ImageOptionsFor(a, rep));
     return;
   }
   RefuseFlagsWithoutEffect(a.image_flags, fmt::format("on a folder of observations ({}/observations.txt: features "
@@ -310,21 +306,10 @@ void Run(const RunArgs& a) {
     eo.alignment = eval::Alignment::kNone;
     err = eval::EvaluateTrajectory(input.groundtruth, traj, eo);
   }
-  {
-    std::vector<slam::FrameReport> reports;
-    std::map<int64_t, size_t> report_of_index;
-    std::map<int64_t, const eval::FrameError*> error_of_index;
-    std::vector<int64_t> posed;
-    for (const slam::FrameResult& r : results) {
-      report_of_index[r.index] = reports.size();
-      reports.push_back(ToFrameReport(r));
-      if (r.estimate.tracked) posed.push_back(r.index);
-    }
-    if (err)
-      for (const eval::FrameError& e : err->frames) error_of_index[posed[e.est_index]] = &e;
-    WriteFramesCsv((std::filesystem::path(a.out) / "frames.csv").string(), reports, report_of_index, error_of_index,
-                   nullptr);
-  }
+  std::vector<slam::FrameReport> reports;
+  reports.reserve(results.size());
+  for (const slam::FrameResult& r : results) reports.push_back(ToFrameReport(r));
+  WriteFramesCsv((std::filesystem::path(a.out) / "frames.csv").string(), reports, err);
 
   int tracked = 0, lost = 0, keyframes = 0;
   std::vector<double> ms;

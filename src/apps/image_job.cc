@@ -420,7 +420,7 @@ void ImageRun::WriteTrajectoryMapAndFrames() {
   std::map<int64_t, const eval::FrameError*> error_of_index;
   if (errors)
     for (const eval::FrameError& e : errors->frames) error_of_index[traj_frames[e.est_index]] = &e;
-  WriteFramesCsv((out / "frames.csv").string(), reports, report_of_index, error_of_index, &rows);
+  WriteFramesCsv((out / "frames.csv").string(), reports, report_of_index, error_of_index, rows);
 }
 
 

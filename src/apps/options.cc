@@ -46,9 +46,7 @@ CLI::Validator Between(double lo, double hi) {
   return FiniteNumber(lo, false, hi, fmt::format("in [{}, {}]", lo, hi));
 }
 
-namespace {
-// The first number in a small kernel file ("max" or a missing file: nullopt).
-std::optional<uint64_t> ReadNumberFile(const char* path, const char* key = nullptr) {
+std::optional<uint64_t> ReadNumberFile(const char* path, const char* key) {
   std::ifstream in(path);
   std::string token;
   while (in >> token) {
@@ -62,7 +60,6 @@ std::optional<uint64_t> ReadNumberFile(const char* path, const char* key = nullp
   }
   return std::nullopt;
 }
-}  // namespace
 
 std::optional<uint64_t> AvailableMemoryBytes() {
   std::optional<uint64_t> available;

@@ -43,6 +43,9 @@ void AddBackendFlag(CLI::App* cmd, std::string* backend);
 // Memory a new allocation can have without swapping or being killed: /proc/meminfo's MemAvailable, capped by the
 // cgroup's limit less its use (a container's or a job's). nullopt when neither can be read.
 std::optional<uint64_t> AvailableMemoryBytes();
+// The first number in a small kernel file (/proc, /sys), or the one after `key` ("MemAvailable:", "VmRSS:");
+// nullopt for a missing file, key or number ("max").
+std::optional<uint64_t> ReadNumberFile(const char* path, const char* key = nullptr);
 
 // Ctrl-C (SIGINT) and SIGTERM (what `timeout`, `kill` and job schedulers send): the first asks the running
 // job to stop and write what it has; a second one kills.

@@ -85,33 +85,58 @@ std::string FrontEndCells(const FrameRow& row) {
 
 }  // namespace
 
-void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
-                    const std::map<int64_t, size_t>& report_of_index,
-                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>* rows) {
+namespace {
+
+std::ofstream OpenFramesCsv(const std::string& path) {
   std::ofstream f(path);
   if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", path));
   f << kBackEndColumns << ',' << kFrontEndColumns << ",note\n";
-  if (!rows) {  // a run from observations: no front end
-    const std::string no_front_end(static_cast<size_t>(std::count(kFrontEndColumns, kFrontEndColumns + std::char_traits<char>::length(kFrontEndColumns), ',')), ',');
-    for (const slam::FrameReport& r : reports)
-      f << BackEndCells(r, error_of_index) << ',' << no_front_end << ',' << Clean(r.note) << '\n';
-  } else {
-    for (const FrameRow& row : *rows) {
-      if (row.skipped) {
-        // The counts 0, the times empty but the decoding's and the frame's; the note says why (the reader's
-        // message names the file; otherwise the name is added).
-        const std::string why = row.error.find(row.name) != std::string::npos ? row.error : row.name + ": " + row.error;
-        f << fmt::format("{},{:.9f},skipped,{}{}{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
-                         Repeat(",", 12), Repeat("0,", 23), row.decode_ms, Repeat(",", 10), row.frame_ms, Clean(why));
-        continue;
-      }
-      auto it = report_of_index.find(row.index);
-      if (it == report_of_index.end()) continue;  // interrupted between the front end and the back end
-      const slam::FrameReport& r = reports[it->second];
-      f << BackEndCells(r, error_of_index) << ',' << FrontEndCells(row) << ',' << Clean(r.note) << '\n';
-    }
-  }
+  return f;
+}
+
+void CloseFramesCsv(std::ofstream& f, const std::string& path) {
+  f.close();
   if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", path));
+}
+
+}  // namespace
+
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                    const std::map<int64_t, size_t>& report_of_index,
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>& rows) {
+  std::ofstream f = OpenFramesCsv(path);
+  for (const FrameRow& row : rows) {
+    if (row.skipped) {
+      // The counts 0, the times empty but the decoding's and the frame's; the note says why (the reader's
+      // message names the file; otherwise the name is added).
+      const std::string why = row.error.find(row.name) != std::string::npos ? row.error : row.name + ": " + row.error;
+      f << fmt::format("{},{:.9f},skipped,{}{}{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
+                       Repeat(",", 12), Repeat("0,", 23), row.decode_ms, Repeat(",", 10), row.frame_ms, Clean(why));
+      continue;
+    }
+    auto it = report_of_index.find(row.index);
+    if (it == report_of_index.end()) continue;  // interrupted between the front end and the back end
+    const slam::FrameReport& r = reports[it->second];
+    f << BackEndCells(r, error_of_index) << ',' << FrontEndCells(row) << ',' << Clean(r.note) << '\n';
+  }
+  CloseFramesCsv(f, path);
+}
+
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                    const std::optional<eval::TrajectoryErrors>& errors) {
+  // The trajectory the errors are of is the posed reports in order: its pose k is the k-th posed report's frame.
+  std::map<int64_t, const eval::FrameError*> error_of_index;
+  if (errors) {
+    std::vector<int64_t> posed;
+    for (const slam::FrameReport& r : reports)
+      if (r.has_pose) posed.push_back(r.index);
+    for (const eval::FrameError& e : errors->frames) error_of_index[posed[e.est_index]] = &e;
+  }
+  std::ofstream f = OpenFramesCsv(path);
+  const std::string no_front_end(static_cast<size_t>(std::count(kFrontEndColumns, kFrontEndColumns + std::char_traits<char>::length(kFrontEndColumns), ',')), ',');
+  for (const slam::FrameReport& r : reports)
+    f << BackEndCells(r, error_of_index) << ',' << no_front_end << ',' << Clean(r.note) << '\n';
+  CloseFramesCsv(f, path);
 }
 
 void ImageRun::WriteReport() {

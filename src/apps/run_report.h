@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -45,11 +46,15 @@ struct Stage {
 nlohmann::json StageJson(const Stage& s);
 // {"count", "rmse", "mean", "median", "max"}, null where not finite.
 nlohmann::json StatsJson(const eval::ErrorStats& s);
-// frames.csv, one schema for every run that builds a map: per frame, the back end's report (by index) and its error
-// against the ground truth when known, then the front end's counts and times (`rows`; empty cells on a run from
-// observations, rows == nullptr: one line per report then), then the note.
+// frames.csv, one schema for every run: per frame the back end's report and its error against the ground truth
+// when known, then the front end's counts and times, then the note.
+// A run on images: one line per frame of `rows` (skipped frames included), its report found by index.
 void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
                     const std::map<int64_t, size_t>& report_of_index,
-                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>* rows);
+                    const std::map<int64_t, const eval::FrameError*>& error_of_index, const std::vector<FrameRow>& rows);
+// A run without a front end (observations, --known-map): one line per report, the front end's cells empty;
+// `errors` are those of the trajectory made of the posed reports in order.
+void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport>& reports,
+                    const std::optional<eval::TrajectoryErrors>& errors);
 
 }  // namespace mcslam::apps

@@ -518,30 +518,16 @@ TEST(CliImagesReal, Kitti06PnpPoseAndBundleAdjustment) {
   // The structure step was the bundle adjustment: it counts every point of its window as adjusted (measured
   // 657 a keyframe after the initialisation), where the Monte Carlo step counts the points it re-sampled
   // (measured 7.5 a keyframe with --structure mc).
-  auto split = [](const std::string& line) {
-    std::vector<std::string> cells;
-    std::stringstream ss(line);
-    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
-    return cells;
-  };
-  std::istringstream csv(ReadText(dir / "o/frames.csv"));
-  std::string line;
-  std::getline(csv, line);
-  const std::vector<std::string> header = split(line);
-  auto column = [&](const std::string& name) {
-    return static_cast<size_t>(std::find(header.begin(), header.end(), name) - header.begin());
-  };
-  const size_t keyframe_col = column("keyframe"), init_col = column("init"), adjusted_col = column("adjusted");
-  const size_t last_col = std::max({keyframe_col, init_col, adjusted_col});
-  ASSERT_LT(last_col, header.size()) << line;
-  int keyframes = 0, adjusted = 0;
-  while (std::getline(csv, line)) {
-    const std::vector<std::string> cells = split(line);  // a trailing empty note is no cell: hence no == check
-    ASSERT_GT(cells.size(), last_col) << line;
-    if (cells[keyframe_col] == "1" && cells[init_col] == "0") ++keyframes, adjusted += std::stoi(cells[adjusted_col]);
-  }
+  const std::string csv = dir / "o/frames.csv";
+  const std::vector<std::string> keyframe = testing::CsvColumn(csv, "keyframe"), init = testing::CsvColumn(csv, "init"),
+                                 adjusted = testing::CsvColumn(csv, "adjusted");
+  ASSERT_EQ(testing::CsvShapeErrors(csv), std::vector<std::string>{});
+  ASSERT_FALSE(keyframe.empty());
+  int keyframes = 0, adjusted_sum = 0;
+  for (size_t i = 0; i < keyframe.size(); ++i)
+    if (keyframe[i] == "1" && init[i] == "0") ++keyframes, adjusted_sum += std::stoi(adjusted[i]);
   ASSERT_GT(keyframes, 0);
-  EXPECT_GT(adjusted / keyframes, 100) << adjusted << " adjusted over " << keyframes << " keyframes";
+  EXPECT_GT(adjusted_sum / keyframes, 100) << adjusted_sum << " adjusted over " << keyframes << " keyframes";
 }
 
 TEST(CliImagesReal, SevenScenesRedKitchen) {

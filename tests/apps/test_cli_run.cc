@@ -310,16 +310,18 @@ GapRun RunOverAGap(const std::string& scenario, const std::string& out, const st
   g.output = r.output;
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(Field(r.output, "skipped"), 30) << r.output;
-  std::istringstream csv(ReadText(out + "/frames.csv"));
-  std::string line;
-  std::getline(csv, line);
-  while (std::getline(csv, line)) {
-    std::vector<std::string> f;
-    std::stringstream ls(line);
-    for (std::string c; std::getline(ls, c, ',');) f.push_back(c);
-    if (f.size() <= 18u || f[2] != "tracked") continue;
-    g.tracked_after_gap += std::stoi(f[0]) >= 150;
-    g.worst_m = std::max(g.worst_m, std::stod(f[17]));  // trans_err_m, after the Sim(3) alignment
+  const std::string csv = out + "/frames.csv";
+  const std::vector<std::string> index = testing::CsvColumn(csv, "index"), status = testing::CsvColumn(csv, "status"),
+                                 terr = testing::CsvColumn(csv, "trans_err_m");  // after the Sim(3) alignment
+  EXPECT_FALSE(index.empty());
+  for (size_t i = 0; i < index.size(); ++i) {
+    if (status[i] != "tracked") continue;
+    if (terr[i].empty()) {
+      ADD_FAILURE() << "tracked frame " << index[i] << " has no error against the ground truth";
+      continue;
+    }
+    g.tracked_after_gap += std::stoi(index[i]) >= 150;
+    g.worst_m = std::max(g.worst_m, std::stod(terr[i]));
   }
   return g;
 }
