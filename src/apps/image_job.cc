@@ -18,6 +18,7 @@
 #include "apps/run_report.h"
 #include "apps/image_run.h"
 #include "apps/options.h"
+#include "apps/options_json.h"
 #include "apps/slam_job.h"
 #include "core/median.h"
 #include "eval/trajectory_eval.h"
@@ -67,6 +68,10 @@ void ImageJobOptions::Check() const {
     throw std::invalid_argument(fmt::format("--overlay {}: the overlay is an .mp4 file (mp4v)", overlay_path));
   if (!plot_path.empty() && !cv::haveImageWriter(plot_path))
     throw std::invalid_argument(fmt::format("--plot {}: not an image file name OpenCV can write (use .png)", plot_path));
+  if (!load_map_path.empty() && !relocalise)
+    throw std::invalid_argument("--load-map: a run in a loaded map starts by relocalising in it; leave out --no-relocalise");
+  if (!load_map_path.empty() && gt_scale)
+    throw std::invalid_argument("--gt-scale: has no effect with --load-map (the map sets the scale); leave it out");
   try {
     frontend.Check();
   } catch (const std::invalid_argument& e) {
@@ -89,6 +94,11 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
       ->capture_default_str();
   cmd->add_option("--overlay", o->overlay_path, "AR overlay video (.mp4): tracked features and a cube in the map");
   cmd->add_option("--plot", o->plot_path, "Top view of the trajectory against the ground truth (.png)");
+  cmd->add_option("--save-map", o->save_map_path,
+                  "Write the map at the end of the run (points, descriptors, keyframes, camera: docs/map_format.md)");
+  cmd->add_option("--load-map", o->load_map_path,
+                  "Start in the map of an earlier run (--save-map): relocalise in it, then track and extend it in its "
+                  "frame and scale");
   cmd->add_option("--start", o->start, "First frame to process (index in the source)")->capture_default_str();
   cmd->add_option("--end", o->end, "Last frame to process, inclusive (-1: to the end)")->capture_default_str();
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
@@ -169,6 +179,14 @@ void ImageRun::Open() {
     if (gt->empty()) throw std::runtime_error(fmt::format("--gt {}: holds no pose", options.gt_path));
   }
 
+  if (!options.load_map_path.empty()) {
+    try {
+      map_in = io::ReadMapFile(options.load_map_path);
+    } catch (const std::runtime_error& e) {
+      throw std::runtime_error(fmt::format("--load-map: {}", e.what()));
+    }
+  }
+
   count = data.source->FrameCount();
   // A video's frame count is the container's word and may be off; only lists of images are exact.
   const bool exact_count = count && data.kind != io::DatasetKind::kVideo && data.kind != io::DatasetKind::kWebcam;
@@ -218,6 +236,20 @@ void ImageRun::Setup(const slam::SystemOptions& system_in) {
     if (!gt) throw std::invalid_argument("--gt-scale needs a ground truth: the dataset has none and no --gt was given");
     vslam->system().SetBaselineOracle(BaselineOracle(*gt));
   }
+
+  if (map_in) {
+    try {
+      vslam->LoadMap(*map_in);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(fmt::format("--load-map {}: {}", options.load_map_path, e.what()));
+    }
+    spdlog::info("starting in the map {}: {} points, {} keyframes", options.load_map_path, map_in->points.size(),
+                 map_in->keyframes.size());
+    map_in.reset();  // the System holds it now
+  }
+  if (const fs::path parent = fs::path(options.save_map_path).parent_path();
+      !options.save_map_path.empty() && !parent.empty())
+    fs::create_directories(parent, ec);
 
   last = options.end >= 0 ? options.end : (count ? *count - 1 : -1);
   spdlog::info("{}: {} camera {} ({}); frames {}..{}; {} hypotheses/frame, {} samples/point, backend {}; "
@@ -371,9 +403,27 @@ void ImageRun::CheckEnd() {
 // Whatever happened before, what was computed is written.
 void ImageRun::WriteOutputs() {
   WriteTrajectoryMapAndFrames();
+  WriteMap();
   WriteReport();
   WritePlot();
   if (overlay) overlay.reset();  // closes the file
+}
+
+// A map that cannot be written loses nothing else: the failure is the run's, reported after every output.
+void ImageRun::WriteMap() {
+  if (options.save_map_path.empty()) return;
+  try {
+    io::MapFile map = vslam->ExportMap();
+    map.options = {{"backend", backend}, {"system", ToJson(sys_opts)}, {"frontend", ToJson(fe_opts)}};
+    if (map.points.empty())
+      spdlog::warn("--save-map {}: the map is empty (the run never initialised)", options.save_map_path);
+    io::WriteMapFile(options.save_map_path, map);
+    spdlog::info("map written to {}: {} points, {} keyframes", options.save_map_path, map.points.size(),
+                 map.keyframes.size());
+    map_saved = true;
+  } catch (const std::exception& e) {
+    if (failure.empty()) failure = fmt::format("--save-map: {}", e.what());
+  }
 }
 
 void ImageRun::WriteTrajectoryMapAndFrames() {

@@ -17,6 +17,7 @@
 #include "apps/slam_job.h"
 #include "eval/trajectory_eval.h"
 #include "io/datasets.h"
+#include "io/map_file.h"
 #include "io/trajectory_io.h"
 #include "pipeline/visual_slam.h"
 
@@ -35,6 +36,8 @@ struct ImageRun {
   std::optional<io::Trajectory> gt;
   std::string gt_origin;
   std::optional<int64_t> count;  // frames, when the source knows
+  std::optional<io::MapFile> map_in;  // --load-map, read before any frame
+  bool map_saved = false;             // --save-map written
   // Setup.
   slam::SystemOptions sys_opts;
   frontend::FrontendOptions fe_opts;
@@ -75,6 +78,7 @@ struct ImageRun {
   void WriteTrajectoryMapAndFrames();
   void WriteReport();
   void WritePlot();
+  void WriteMap();
 };
 
 }  // namespace mcslam::apps

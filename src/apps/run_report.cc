@@ -211,6 +211,11 @@ void ImageRun::WriteReport() {
                   {"end", options.end}};
   j["options"]["system"] = ToJson(sys_opts);  // every option: what the run did, from its report alone
   j["options"]["frontend"] = ToJson(fe_opts);
+  if (!options.load_map_path.empty() || !options.save_map_path.empty()) {
+    j["map_files"] = nlohmann::json::object();
+    if (!options.load_map_path.empty()) j["map_files"]["loaded"] = options.load_map_path;
+    if (map_saved) j["map_files"]["saved"] = options.save_map_path;
+  }
   j["frames"] = frames_processed;
   j["frames_read"] = frames_read;
   j["skipped"] = sum.skipped;

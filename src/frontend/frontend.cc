@@ -179,6 +179,7 @@ void Frontend::Reset() {
 
 size_t Frontend::NumTracks() const { return impl_->tracks.size(); }
 int64_t Frontend::NextFeatureId() const { return impl_->next_id; }
+void Frontend::ReserveIdsBelow(int64_t next) { impl_->next_id = std::max(impl_->next_id, next); }
 const FrontendOptions& Frontend::options() const { return impl_->options; }
 
 }  // namespace mcslam::frontend

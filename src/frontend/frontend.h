@@ -206,6 +206,9 @@ class Frontend {
   void Reset();
   size_t NumTracks() const;
   int64_t NextFeatureId() const;
+  // New tracks get ids from `next` on (never lower than now): the ids below belong to something else, e.g. the
+  // points of a map loaded from a file, which remapping and relocalisation may relabel tracks to.
+  void ReserveIdsBelow(int64_t next);
   const FrontendOptions& options() const;
 
  private:

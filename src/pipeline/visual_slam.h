@@ -21,6 +21,7 @@
 #include "core/camera.h"
 #include "core/pose.h"
 #include "frontend/frontend.h"
+#include "io/map_file.h"
 #include "slam/system.h"
 
 namespace mcslam::pipeline {
@@ -79,6 +80,16 @@ class VisualSlam {
   // A frame that could not be read: the camera may have moved far meanwhile, so the next frame is relocalised.
   void SkipFrame() { after_gap_ = true; }
 
+  // The map as a map file holds it (io/map_file.h; its options are the caller's to fill in): the points in
+  // the map, each with its SIFT descriptor when one is known (its live track's, or the one kept since its track
+  // ended), and the posed keyframes with the features they kept.
+  io::MapFile ExportMap();
+  // Starts in a map read from a file, before the first frame: the System holds its points and keyframes, the
+  // front end numbers its tracks above the map's ids, and the first frames are relocalised against the map by
+  // the points' descriptors. Throws std::invalid_argument when the map was made with another camera (naming
+  // what differs), has no point with a descriptor, or relocalisation is off; std::logic_error after a frame.
+  void LoadMap(const io::MapFile& map);
+
   const slam::System& system() const { return system_; }
   slam::System& system() { return system_; }
   const frontend::Frontend& frontend() const { return frontend_; }
@@ -87,12 +98,16 @@ class VisualSlam {
  private:
   std::vector<frontend::RemapRequest> RemapRequests() const;
   void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step);
+  // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
+  void KeepFirstLooks(const FrameObservations& obs);
 
   PinholeCamera camera_;
   VisualSlamOptions options_;
   frontend::Frontend frontend_;
   slam::System system_;
   std::unordered_map<int64_t, frontend::Descriptor> lost_descriptors_;  // map points whose track ended
+  // Every map point's look when it joined the map (its track's descriptor then): relocalisation's second look.
+  std::unordered_map<int64_t, frontend::Descriptor> first_descriptors_;
   std::optional<Pose> latest_cam_from_world_;
   bool was_lost_ = false;
   bool after_gap_ = false;  // frames were skipped since the last one processed

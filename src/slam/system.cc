@@ -134,6 +134,30 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
   point_normals_ = compute::NormalTable(options_.mapping.samples, options_.seed, /*stream=*/2);
 }
 
+void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes) {
+  if (!map_.frames.empty() || initialised_) throw std::logic_error("System::StartInMap: only before the first frame");
+  for (MapPoint& p : points) {
+    p.state = PointState::kLost;
+    p.inlier = true;
+    p.last_seen_frame = -1;
+    p.removed_frame = -1;
+    map_.Add(p);
+  }
+  for (FrameRecord& f : keyframes) {
+    f.has_pose = true;
+    map_.keyframes.push_back(static_cast<int>(map_.frames.size()));
+    map_.frames.push_back(std::move(f));
+  }
+  initialised_ = true;
+  // The pose step's translation floor, as the initialisation sets it: from the median depth of the points in
+  // the first camera.
+  std::vector<double> depths;
+  if (!map_.frames.empty())
+    for (const MapPoint& p : map_.points())
+      if (const double z = (map_.frames.front().cam_from_world * p.position_in_world).z(); z > 0) depths.push_back(z);
+  if (!depths.empty()) tracker_->SetTranslationFloor(options_.sigma_trans_floor_rel_depth * UpperMedian(depths));
+}
+
 std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   FrameRecord rec;
   rec.index = frame.index;
@@ -153,6 +177,16 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   PruneHistory(slot);
 
   std::vector<FrameReport> out;
+  if (initialised_ && last_posed_slot_ < 0 && !frame.pose_hint) {  // in a loaded map, not localised yet
+    FrameReport r;
+    r.index = frame.index;
+    r.stamp_s = frame.stamp_s;
+    r.status = FrameStatus::kLost;
+    r.note = "not localised in the loaded map yet";
+    r.map_points = static_cast<int>(map_.points().size());
+    out.push_back(r);
+    return out;
+  }
   if (!initialised_) {
     const auto t0 = std::chrono::steady_clock::now();
     if (TryInitialise(&out)) return out;

@@ -226,6 +226,11 @@ class System {
   // baseline is then scaled to it instead of to 1.
   void SetBaselineOracle(std::function<std::optional<double>(double, double)> oracle) { oracle_ = std::move(oracle); }
 
+  // Starts in a map made before (a map file): its points and its keyframes (poses and features). Only before
+  // the first frame; throws std::logic_error after one. The System is then initialised but not localised: a
+  // frame without a pose hint is lost until one is relocalised against the map (Relocalise, then Process with
+  // the pose as its hint); tracking and mapping go on from there, in the map's frame and scale.
+  void StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes);
   bool initialised() const { return initialised_; }
   const Map& map() const { return map_; }
   const PinholeCamera& camera() const { return camera_; }

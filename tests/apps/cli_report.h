@@ -3,11 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <regex>
 #include <string>
 
 #include <nlohmann/json.hpp>
+
+#include "test_util.h"
 
 namespace mcslam::testing {
 
@@ -47,5 +50,17 @@ inline void ExpectSaneRunTimes(const std::string& output, const std::string& rep
   EXPECT_NEAR(Field(output, "cpu_s"), cpu, 5e-4 + 1e-9) << output;
   EXPECT_NEAR(Field(output, "cpu_ratio"), ratio, 5e-3 + 1e-9) << output;
 }
+
+// The folder of a real sequence of the data folder (MCSLAM_DATA or ../shared/data); empty when absent.
+inline std::string RealSequence(const std::string& name) {
+  const std::string data = DataDir();
+  if (data.empty() || !std::filesystem::is_directory(std::filesystem::path(data) / name)) return "";
+  return (std::filesystem::path(data) / name).string();
+}
+
+// The folder of a real sequence in `var`, or the test skipped (visibly) when it is not there.
+#define REAL_SEQUENCE_OR_SKIP(var, name)                   \
+  const std::string var = mcslam::testing::RealSequence(name); \
+  if (var.empty()) GTEST_SKIP() << name << " not found (set MCSLAM_DATA or ../shared/data)"
 
 }  // namespace mcslam::testing

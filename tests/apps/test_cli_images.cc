@@ -431,17 +431,6 @@ TEST(CliImages, FrameRangeOutOfRangeNamesTheFlag) {
 
 // ---- the real sequences (../shared/data) ------------------------------------------------------------------
 
-std::string RealSequence(const std::string& name) {
-  const std::string data = DataDir();
-  if (data.empty() || !fs::is_directory(fs::path(data) / name)) return "";
-  return (fs::path(data) / name).string();
-}
-
-// The folder of a real sequence in `var`, or the test skipped (visibly) when it is not there.
-#define REAL_SEQUENCE_OR_SKIP(var, name) \
-  const std::string var = RealSequence(name); \
-  if (var.empty()) GTEST_SKIP() << name << " not found (set MCSLAM_DATA or ../shared/data)"
-
 struct RealRun {
   std::string output;     // what mcslam printed
   nlohmann::json report;  // its report.json; null when the run failed (a test failure already)

@@ -142,6 +142,63 @@ TEST(VisualSlam, AnImageTheFrontEndDoesNotTakeSkipsThatFrameOnly) {
   EXPECT_EQ(next.current()->status, slam::FrameStatus::kTracked) << next.current()->note;
 }
 
+// ---- maps saved and loaded ---------------------------------------------------------------------------------
+
+TEST(VisualSlamMap, AMapLoadedAndSavedAgainIsTheSameFile) {
+  constexpr int kFrames = 60;
+  const Scene scene(kFrames, 2);
+  VisualSlam first = Make(scene);
+  for (int i = 0; i < kFrames; ++i) first.Process(scene.Frame(i), i, i / kFps);
+  ASSERT_TRUE(first.system().initialised());
+  io::MapFile map = first.ExportMap();
+  map.options = {{"note", "as the caller fills it"}};
+  ASSERT_GT(map.points.size(), 50u);
+  const slam::Map& m = first.system().map();
+  ASSERT_EQ(map.keyframes.size(), static_cast<size_t>(std::count_if(m.keyframes.begin(), m.keyframes.end(), [&](int k) {
+              return m.frames[static_cast<size_t>(k)].has_pose;
+            })));
+  ASSERT_GE(map.keyframes.size(), static_cast<size_t>(kFrames / 2));
+  // Each point with a look: the live tracks' descriptors and those kept since a track ended.
+  const auto described = std::count_if(map.points.begin(), map.points.end(), [](const io::MapFilePoint& p) {
+    return p.descriptor.has_value() && p.first_descriptor.has_value();
+  });
+  EXPECT_EQ(static_cast<size_t>(described), map.points.size());
+  const std::vector<uint8_t> bytes = io::SerialiseMapFile(map);
+
+  VisualSlam second = Make(scene);
+  second.LoadMap(io::ParseMapFile(bytes, "first.map"));
+  EXPECT_TRUE(second.system().initialised());
+  io::MapFile again = second.ExportMap();
+  again.options = map.options;
+  EXPECT_EQ(io::SerialiseMapFile(again), bytes);
+  // New tracks are numbered above every id of the map, so that none is taken for a map point.
+  EXPECT_GT(second.frontend().NextFeatureId(), map.points.back().id);
+}
+
+TEST(VisualSlamMap, AMapIsRefusedWhereItCannotBeUsed) {
+  const Scene scene(10, 1);
+  VisualSlam vs = Make(scene);
+  for (int i = 0; i < 3; ++i) vs.Process(scene.Frame(i), i, i / kFps);
+  io::MapFile map = vs.ExportMap();  // not initialised: no point
+  VisualSlam empty = Make(scene);
+  try {
+    empty.LoadMap(map);
+    FAIL() << "a map without points was loaded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("none with a descriptor"), std::string::npos) << e.what();
+  }
+  map.camera.fx += 5;
+  VisualSlam other = Make(scene);
+  try {
+    other.LoadMap(map);
+    FAIL() << "a map of another camera was loaded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("another camera"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("fx"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(vs.LoadMap(vs.ExportMap()), std::invalid_argument);  // after frames, whatever the map
+}
+
 TEST(VisualSlamOptions, CheckNamesTheField) {
   VisualSlamOptions o;
   EXPECT_NO_THROW(o.Check());
