@@ -10,9 +10,12 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-matplotlib python3-numpy
   clang libclang-rt-14-dev libomp-14-dev
+  libjs-three chromium
 )
 # clang and its runtime libraries (libFuzzer, the sanitizers) build the fuzz targets (scripts/fuzz.sh) and the
-# sanitized tests (make test-sanitize), which also need clang's OpenMP runtime (libomp-14-dev).
+# sanitized tests (make test-sanitize), which also need clang's OpenMP runtime (libomp-14-dev). libjs-three is
+# the WebGL library the viewer's page inlines (mcslam view, run --viewer); chromium opens that page headless in
+# its test (CliView.*).
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -10,6 +10,7 @@ void RegisterSynth(CLI::App& app);
 void RegisterEval(CLI::App& app);
 void RegisterRun(CLI::App& app);
 void RegisterBench(CLI::App& app);
+void RegisterView(CLI::App& app);
 // `bench soak` (apps/bench_soak.cc), on the `bench` command.
 void RegisterBenchSoak(CLI::App* bench);
 

@@ -20,6 +20,7 @@
 #include "apps/options.h"
 #include "apps/options_json.h"
 #include "apps/slam_job.h"
+#include "apps/viewer.h"
 #include "core/median.h"
 #include "eval/trajectory_eval.h"
 #include "io/datasets.h"
@@ -99,6 +100,8 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--load-map", o->load_map_path,
                   "Start in the map of an earlier run (--save-map): relocalise in it, then track and extend it in its "
                   "frame and scale");
+  cmd->add_flag("--viewer", o->viewer,
+                "Also write viewer.html: the map, the trajectory and the per-frame figures in a browser (three.js)");
   cmd->add_option("--start", o->start, "First frame to process (index in the source)")->capture_default_str();
   cmd->add_option("--end", o->end, "Last frame to process, inclusive (-1: to the end)")->capture_default_str();
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
@@ -407,6 +410,16 @@ void ImageRun::WriteOutputs() {
   WriteReport();
   WritePlot();
   if (overlay) overlay.reset();  // closes the file
+  if (options.viewer) {
+    ViewerOptions vo;
+    vo.ground_truth = gt;
+    if (map_saved) vo.map_file = options.save_map_path;
+    try {
+      WriteViewer(out_dir, (out / "viewer.html").string(), vo);
+    } catch (const std::exception& e) {
+      if (failure.empty()) failure = fmt::format("--viewer: {}", e.what());
+    }
+  }
 }
 
 // A map that cannot be written loses nothing else: the failure is the run's, reported after every output.

@@ -35,6 +35,7 @@ struct ImageJobOptions {
   // Map files (io/map_file.h): the map written at the end of the run; a map of an earlier run to start in
   // (relocalised against it, then extended, in its frame and scale).
   std::string save_map_path, load_map_path;
+  bool viewer = false;  // also write viewer.html (apps/viewer.h) into the output folder
   frontend::FrontendOptions frontend;
   // Throws std::invalid_argument naming the flag.
   void Check() const;

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   mcslam::apps::RegisterEval(app);
   mcslam::apps::RegisterRun(app);
   mcslam::apps::RegisterBench(app);
+  mcslam::apps::RegisterView(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
