@@ -77,7 +77,15 @@ void WriteViewer(const std::string& out_dir, const std::string& html_path, const
   const fs::path traj_path = dir / "trajectory.txt";
   if (!fs::exists(traj_path, ec))
     throw std::runtime_error(fmt::format("{}: no trajectory.txt (not the --out folder of `mcslam run`?)", out_dir));
-  const io::Trajectory traj = io::ReadTrajectory(traj_path.string());
+  // A run that never initialised wrote a trajectory without poses: the page then shows what there is.
+  bool any_pose = false;
+  {
+    std::ifstream in(traj_path);
+    std::string line;
+    while (!any_pose && std::getline(in, line))
+      any_pose = line.find_first_not_of(" \t\r") != std::string::npos && line[line.find_first_not_of(" \t\r")] != '#';
+  }
+  const io::Trajectory traj = any_pose ? io::ReadTrajectory(traj_path.string()) : io::Trajectory{};
   io::PointCloud cloud;
   if (fs::exists(dir / "map.ply", ec)) cloud = io::ReadPly((dir / "map.ply").string());
   const std::string three = ReadWhole(fs::path(options.three_dir) / "three.min.js",

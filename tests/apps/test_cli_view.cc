@@ -123,6 +123,17 @@ TEST(CliView, APageWithBrokenDataIsNotReady) {
   EXPECT_NE(p.status.rfind("ready", 0), 0u) << p.status;
 }
 
+// A run without a single pose still gets its page, and keeps its own exit status (3: never initialised), which a
+// failing viewer would have replaced by 1.
+TEST(CliView, ARunThatNeverInitialisedKeepsItsExitStatusAndGetsItsPage) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam(fmt::format("synth --scenario still-start --frames 20 --render --out {}", dir / "scene")).exit_code, 0);
+  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --out {} --viewer", dir / "scene", dir / "out"));
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_TRUE(fs::exists(dir / "out/viewer.html")) << r.output;
+  EXPECT_EQ(r.output.find("--viewer"), std::string::npos) << r.output;
+}
+
 TEST(CliView, AFolderThatIsNoRunIsAClearError) {
   TempDir dir;
   const auto r = RunMcslam(fmt::format("view {}", dir.path().string()));
