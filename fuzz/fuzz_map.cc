@@ -1,5 +1,5 @@
-// Map files (--load-map): what the reader accepts is written back to the same bytes and read again to the same
-// map (a map file holds every number exactly).
+// Map files (--load-map): what the reader accepts, once written, reads back and writes again to the same bytes
+// (the writer's output is canonical; the input need not be) and keeps every point.
 #include <vector>
 
 #include "fuzz_util.h"

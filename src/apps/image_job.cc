@@ -407,12 +407,10 @@ void ImageRun::CheckEnd() {
 void ImageRun::WriteOutputs() {
   WriteTrajectoryMapAndFrames();
   WriteMap();
-  WriteReport();
-  WritePlot();
-  if (overlay) overlay.reset();  // closes the file
-  if (options.viewer) {
+  if (options.viewer) {  // before the report, so that the report carries its failure
     ViewerOptions vo;
     vo.ground_truth = gt;
+    vo.title = input;
     if (map_saved) vo.map_file = options.save_map_path;
     try {
       WriteViewer(out_dir, (out / "viewer.html").string(), vo);
@@ -420,6 +418,9 @@ void ImageRun::WriteOutputs() {
       if (failure.empty()) failure = fmt::format("--viewer: {}", e.what());
     }
   }
+  WriteReport();
+  WritePlot();
+  if (overlay) overlay.reset();  // closes the file
 }
 
 // A map that cannot be written loses nothing else: the failure is the run's, reported after every output.
@@ -503,6 +504,11 @@ ImageJobSummary ImageRun::Finish() {
 
   if (!failure.empty()) throw std::runtime_error(fmt::format("{} (outputs so far written to {})", failure, out_dir));
   if (interrupted) throw InterruptedError();
+  if (sum.initialised && !sum.localised && !options.load_map_path.empty())
+    throw ExitError(kExitNotInitialised,
+                    fmt::format("no frame was relocalised in the map {} ({} frames; outputs written to {}): the run "
+                                "never saw a place of the map as it looked when it was made",
+                                options.load_map_path, frames_processed, out_dir));
   if (!sum.initialised)
     throw ExitError(kExitNotInitialised, fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "

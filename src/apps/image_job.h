@@ -52,6 +52,7 @@ struct ImageJobSummary {
   int64_t frames = 0;  // processed (skipped ones not counted)
   int64_t skipped = 0, tracked = 0, lost = 0, not_initialised = 0, keyframes = 0, map_points = 0;
   bool initialised = false;
+  bool localised = false;  // some frame was posed (a run in a loaded map is initialised from the start)
   bool interrupted = false;
   double fps = 0;
   std::optional<double> ate_rmse_m;

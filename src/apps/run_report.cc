@@ -144,6 +144,7 @@ void ImageRun::WriteReport() {
   sum.frames = frames_processed;
   sum.interrupted = interrupted;
   sum.initialised = vslam->system().initialised();
+  sum.localised = vslam->system().localised();
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_init, be_total, frame_total;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,

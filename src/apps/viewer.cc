@@ -136,8 +136,8 @@ void WriteViewer(const std::string& out_dir, const std::string& html_path, const
   }
 
   json data;
-  json title = out_dir;
-  if (fs::exists(dir / "report.json", ec)) {
+  json title = options.title.empty() ? out_dir : options.title;
+  if (options.title.empty() && fs::exists(dir / "report.json", ec)) {
     try {
       std::ifstream in(dir / "report.json");
       const json report = json::parse(in);
@@ -190,7 +190,7 @@ void WriteViewer(const std::string& out_dir, const std::string& html_path, const
   }
   data["observed"] = observed;
 
-  const std::string page = ViewerPage(three, orbit, data.dump());
+  const std::string page = ViewerPage(three, orbit, data.dump(-1, ' ', false, json::error_handler_t::replace));
   std::ofstream out(html_path, std::ios::binary | std::ios::trunc);
   if (!out) throw std::runtime_error(fmt::format("{}: cannot open for writing", html_path));
   out << page;

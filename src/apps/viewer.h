@@ -14,6 +14,7 @@ namespace mcslam::apps {
 struct ViewerOptions {
   std::optional<io::Trajectory> ground_truth;
   std::string map_file;      // a map file (--save-map) of the run: which points each keyframe saw; empty: none
+  std::string title;         // the page's title; empty: report.json's input, or the folder
   std::string three_dir = "/usr/share/javascript/three";  // three.min.js, examples/js/controls/OrbitControls.js
 };
 

@@ -121,10 +121,15 @@ constexpr const char* kApp = R"JS(
   const est = line(T.positions, colours.est);
   const currentGeom = new THREE.BufferGeometry();
   currentGeom.setAttribute('position', new THREE.Float32BufferAttribute(new Array(48).fill(0), 3));
-  scene.add(new THREE.LineSegments(currentGeom, new THREE.LineBasicMaterial({ color: colours.current })));
+  // These two change geometry as the slider moves: their bounding spheres would be stale, so never culled.
+  const currentLines = new THREE.LineSegments(currentGeom, new THREE.LineBasicMaterial({ color: colours.current }));
+  currentLines.frustumCulled = false;
+  scene.add(currentLines);
   const seenGeom = new THREE.BufferGeometry();
   seenGeom.setAttribute('position', new THREE.Float32BufferAttribute([], 3));
-  scene.add(new THREE.Points(seenGeom, new THREE.PointsMaterial({ size: 5, sizeAttenuation: false, color: colours.seen })));
+  const seenPoints = new THREE.Points(seenGeom, new THREE.PointsMaterial({ size: 5, sizeAttenuation: false, color: colours.seen }));
+  seenPoints.frustumCulled = false;
+  scene.add(seenPoints);
 
   // Seen from above and behind the start, looking at the middle.
   const controls = new THREE.OrbitControls(camera, renderer.domElement);
@@ -137,9 +142,10 @@ constexpr const char* kApp = R"JS(
   controls.update();
 
   const info = document.getElementById('info');
-  info.innerHTML = '<b>' + D.title + '</b><br>' + N + ' poses, ' + npts + ' map points; ' + D.units +
+  info.innerHTML = '<b></b><br>' + N + ' poses, ' + npts + ' map points; ' + D.units +
     '<div class="legend"><span style="color:#35d07f">estimate</span>' + (D.ground_truth ? '<span style="color:#e0503a">ground truth</span>' : '') +
     '<span style="color:#ffd23f">current frame</span><span style="color:#6d7885">keyframes</span></div>';
+  info.querySelector('b').textContent = D.title;  // a path, as text (it may hold < or &)
 
   // Per-frame figures of frames.csv: each series scaled to its own range; the current frame marked.
   const S = D.stats, rows = S.index ? S.index.length : 0;
@@ -226,12 +232,15 @@ constexpr const char* kApp = R"JS(
 }  // namespace
 
 std::string ViewerPage(const std::string& three_js, const std::string& orbit_js, const std::string& data_json) {
-  // Inside a <script> element "</" would end it early: JSON lets it be written "<\/".
+  // Inside a <script> element "</script" would end it and "<!--" change how it ends: every '<' (only ever in
+  // a JSON string) is written as the escape \u003c, which JSON.parse reads back as '<'.
   std::string data;
   data.reserve(data_json.size());
-  for (size_t i = 0; i < data_json.size(); ++i) {
-    data += data_json[i];
-    if (data_json[i] == '<' && i + 1 < data_json.size() && data_json[i + 1] == '/') data += '\\';
+  for (const char c : data_json) {
+    if (c == '<')
+      data += "\\u003c";
+    else
+      data += c;
   }
   std::string page = kHead;
   page += three_js;

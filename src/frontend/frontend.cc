@@ -151,6 +151,12 @@ std::optional<Descriptor> Frontend::GetDescriptor(int64_t feature_id) {
   return std::nullopt;
 }
 
+std::optional<Descriptor> Frontend::DescriptorIfDone(int64_t feature_id) const {
+  for (const Track& t : impl_->tracks)
+    if (t.id == feature_id) return t.descriptor;
+  return std::nullopt;
+}
+
 bool Frontend::Relabel(int64_t from, int64_t to, const std::optional<Descriptor>& descriptor) {
   Impl& m = *impl_;
   m.JoinDescription();

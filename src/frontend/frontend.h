@@ -196,6 +196,9 @@ class Frontend {
   void WaitForDescriptors();
   // The descriptor of a live track (waits for it when still pending); nullopt for an id not tracked now.
   std::optional<Descriptor> GetDescriptor(int64_t feature_id);
+  // The same without waiting: nullopt also while the track's description is still pending (the task writes
+  // its own buffers, never the tracks, so reading them meanwhile is safe).
+  std::optional<Descriptor> DescriptorIfDone(int64_t feature_id) const;
 
   // The live track `from` goes on as `to` (relocalisation matched it to that map point's feature): from
   // now on it is reported under `to` and keeps the descriptor `to` was described with. false (and no

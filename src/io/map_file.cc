@@ -18,6 +18,8 @@ namespace {
 
 using nlohmann::json;
 constexpr const char* kFormatName = "mcslam-map";
+constexpr int64_t kMaxMapId = int64_t{1} << 62;  // ids are track ids: counted from 0, never near this
+constexpr int kMaxDepth = 16;                    // the format nests 4 deep; options, as report.json, a few more
 
 bool Finite(const Eigen::Vector3d& v) { return v.allFinite(); }
 
@@ -25,6 +27,34 @@ json CameraJson(const PinholeCamera& c) {
   return {{"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx}, {"cy", c.cy}, {"width", c.width}, {"height", c.height},
           {"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3}};
 }
+
+// nlohmann's CBOR reader recurses once per nesting level without a limit: a file of a million nested arrays
+// would overflow the stack. Its document builder, behind a SAX interface that refuses to go deeper than
+// kMaxDepth (the parse then stops, and says so).
+class DepthLimitedBuilder {
+ public:
+  explicit DepthLimitedBuilder(json* root) : dom_(*root) {}
+  bool null() { return dom_.null(); }
+  bool boolean(bool v) { return dom_.boolean(v); }
+  bool number_integer(json::number_integer_t v) { return dom_.number_integer(v); }
+  bool number_unsigned(json::number_unsigned_t v) { return dom_.number_unsigned(v); }
+  bool number_float(json::number_float_t v, const json::string_t& s) { return dom_.number_float(v, s); }
+  bool string(json::string_t& v) { return dom_.string(v); }
+  bool binary(json::binary_t& v) { return dom_.binary(v); }
+  bool start_object(std::size_t n) { return ++depth_ <= kMaxDepth && dom_.start_object(n); }
+  bool key(json::string_t& k) { return dom_.key(k); }
+  bool end_object() { return --depth_, dom_.end_object(); }
+  bool start_array(std::size_t n) { return ++depth_ <= kMaxDepth && dom_.start_array(n); }
+  bool end_array() { return --depth_, dom_.end_array(); }
+  bool parse_error(std::size_t at, const std::string& token, const nlohmann::detail::exception& e) {
+    return dom_.parse_error(at, token, e);  // throws it
+  }
+  bool too_deep() const { return depth_ > kMaxDepth; }
+
+ private:
+  nlohmann::detail::json_sax_dom_parser<json> dom_;
+  int depth_ = 0;
+};
 
 // A field of an object, checked: `where` names it in errors ("keyframes[3].q").
 class Reader {
@@ -49,6 +79,8 @@ class Reader {
   int64_t Integer(const json& obj, const char* key, const std::string& where) const {
     const json& v = Field(obj, key, where);
     if (!v.is_number_integer()) Fail(Join(where, key), "is not an integer");
+    if (v.is_number_unsigned() && v.get<uint64_t>() > static_cast<uint64_t>(INT64_MAX))
+      Fail(Join(where, key), "is out of range");
     return v.get<int64_t>();
   }
   // An array of exactly n finite numbers (n < 0: any length).
@@ -149,7 +181,10 @@ MapFile ParseMapFile(const std::vector<uint8_t>& bytes, const std::string& what)
   if (bytes.empty()) rd.Fail("", "is empty, not an mcslam map file");
   json j;
   try {
-    j = json::from_cbor(bytes);
+    DepthLimitedBuilder builder(&j);
+    const bool complete = json::sax_parse(bytes, &builder, json::input_format_t::cbor);
+    if (builder.too_deep()) rd.Fail("", fmt::format("is not an mcslam map file (nested deeper than {})", kMaxDepth));
+    if (!complete) rd.Fail("", "is not an mcslam map file, or it is truncated or corrupt");
   } catch (const json::exception& e) {
     rd.Fail("", fmt::format("is not an mcslam map file, or it is truncated or corrupt (CBOR: {})", e.what()));
   }
@@ -190,6 +225,7 @@ MapFile ParseMapFile(const std::vector<uint8_t>& bytes, const std::string& what)
     const std::string where = fmt::format("points[{}]", i);
     MapFilePoint p;
     p.id = rd.Integer(points[i], "id", where);
+    if (p.id < 0 || p.id >= kMaxMapId) rd.Fail(where + ".id", fmt::format("{} is not a point id (0 .. 2^62)", p.id));
     if (!ids.insert(p.id).second) rd.Fail(where, fmt::format("point id {} is there twice", p.id));
     const std::vector<double> xyz = rd.Numbers(points[i], "xyz", where, 3);
     p.position_in_world = {xyz[0], xyz[1], xyz[2]};
@@ -220,8 +256,11 @@ MapFile ParseMapFile(const std::vector<uint8_t>& bytes, const std::string& what)
     const json& jids = rd.Field(jk, "ids", where);
     if (!jids.is_array()) rd.Fail(where + ".ids", "is not an array");
     for (const json& e : jids) {
-      if (!e.is_number_integer()) rd.Fail(where + ".ids", "holds something that is not an integer");
+      if (!e.is_number_integer() || (e.is_number_unsigned() && e.get<uint64_t>() > static_cast<uint64_t>(INT64_MAX)))
+        rd.Fail(where + ".ids", "holds something that is not an id");
       k.feature_ids.push_back(e.get<int64_t>());
+      if (k.feature_ids.back() < 0 || k.feature_ids.back() >= kMaxMapId)
+        rd.Fail(where + ".ids", fmt::format("{} is not a feature id (0 .. 2^62)", k.feature_ids.back()));
       if (k.feature_ids.size() > 1 && k.feature_ids.back() <= k.feature_ids[k.feature_ids.size() - 2])
         rd.Fail(where + ".ids", "are not in increasing order");
     }

@@ -6,8 +6,9 @@
 //   {"format": "mcslam-map", "version": 1, "camera": {...}, "options": {...},
 //    "points": [{"id", "xyz": [x, y, z], "descriptor": [128], "first_descriptor": [128]} (each absent when none)],
 //    "keyframes": [{"index", "stamp", "q": [w, x, y, z], "t": [x, y, z], "ids": [...], "uv": [u0, v0, ...]}]}
-// Every number is stored exactly (float64; descriptors float32): a map read back and written again gives the
-// same bytes.
+// Every number is stored exactly (CBOR float64, or float32 where that holds the value exactly, as nlohmann
+// writes them): a map read back and written again gives the same bytes. Keyframes keep the features the run
+// still held (SystemOptions' history: the last 1000 frames by default); older keyframes are saved with none.
 #include <array>
 #include <cstdint>
 #include <optional>

@@ -53,7 +53,7 @@ void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
   if (!system_.initialised()) return;
   for (const FeatureObservation& f : obs.features)
     if (!first_descriptors_.count(f.feature_id) && !Removed(system_.map().Find(f.feature_id)))
-      if (std::optional<frontend::Descriptor> d = frontend_.GetDescriptor(f.feature_id))
+      if (std::optional<frontend::Descriptor> d = frontend_.DescriptorIfDone(f.feature_id))  // else: next frame
         first_descriptors_.emplace(f.feature_id, *d);
 }
 
@@ -90,10 +90,14 @@ io::MapFile VisualSlam::ExportMap() {
 }
 
 void VisualSlam::LoadMap(const io::MapFile& map) {
+  if (!system_.map().frames.empty()) throw std::logic_error("VisualSlam::LoadMap: only before the first frame");
   if (const std::string diff = io::CameraDifference(map.camera, camera_); !diff.empty())
     throw std::invalid_argument(fmt::format("the map was made with another camera than this run's ({})", diff));
   if (!options_.relocalise)
     throw std::invalid_argument("a run in a loaded map starts by relocalising in it: relocalisation cannot be off");
+  if (std::none_of(map.points.begin(), map.points.end(), [](const io::MapFilePoint& p) { return p.descriptor.has_value(); }))
+    throw std::invalid_argument(fmt::format("the map has {} points but none with a descriptor to relocalise by",
+                                            map.points.size()));
   std::vector<slam::MapPoint> points;
   int64_t next_id = 0;
   lost_descriptors_.clear();
@@ -107,9 +111,6 @@ void VisualSlam::LoadMap(const io::MapFile& map) {
     if (mp.first_descriptor) first_descriptors_[mp.id] = *mp.first_descriptor;
     next_id = std::max(next_id, mp.id + 1);
   }
-  if (lost_descriptors_.empty())
-    throw std::invalid_argument(fmt::format("the map has {} points but none with a descriptor to relocalise by",
-                                            map.points.size()));
   std::vector<slam::FrameRecord> keyframes;
   for (const io::MapFileKeyframe& k : map.keyframes) {
     slam::FrameRecord f;
@@ -198,7 +199,9 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
   std::sort(recent.begin(), recent.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) < std::get<1>(b);
   });
-  if (recent.size() > static_cast<size_t>(options_.max_relocalisation_points))
+  // In a loaded map before its first relocalisation no point was seen yet (all tie, by id): all of them, or a
+  // map of more than the cap would be searched only where its first points were made.
+  if (system_.localised() && recent.size() > static_cast<size_t>(options_.max_relocalisation_points))
     recent.resize(options_.max_relocalisation_points);
   std::vector<std::pair<int64_t, const frontend::Descriptor*>> map_side;
   for (const auto& [seen, id, d] : recent) map_side.emplace_back(id, d);

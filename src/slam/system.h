@@ -232,6 +232,8 @@ class System {
   // the pose as its hint); tracking and mapping go on from there, in the map's frame and scale.
   void StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes);
   bool initialised() const { return initialised_; }
+  // Some frame has a pose: false before the initialisation, and in a loaded map before its first relocalisation.
+  bool localised() const { return last_posed_slot_ >= 0; }
   const Map& map() const { return map_; }
   const PinholeCamera& camera() const { return camera_; }
 

@@ -151,5 +151,24 @@ TEST(CliMap, MapFilesThatCannotBeUsedAreClearErrorsBeforeAnyFrame) {
   }
 }
 
+// A run in a map of somewhere else (the rendered poster on a wall, in the map of the paper's box): no frame
+// relocalised, every frame reported lost, exit status 3 as for a run that never initialised, outputs written.
+TEST(CliMap, ARunThatNeverFindsTheMapSaysSo) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam(fmt::format("synth --scenario paper --frames 40 --render --out {}", dir / "box")).exit_code, 0);
+  ASSERT_EQ(RunMcslam(fmt::format("synth --scenario planar --frames 15 --render --out {}", dir / "wall")).exit_code, 0);
+  ASSERT_EQ(RunMcslam(fmt::format("run {} --dataset synthetic --out {} --save-map {}", dir / "box", dir / "b",
+                                  dir / "box.map"))
+                .exit_code,
+            0);
+  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --out {} --load-map {}", dir / "wall", dir / "w",
+                                       dir / "box.map"));
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("no frame was relocalised in the map"), std::string::npos) << r.output;
+  const nlohmann::json report = ReadJson(dir / "w/report.json");
+  EXPECT_EQ(report["tracked"].get<int>(), 0);
+  EXPECT_EQ(report["lost"].get<int>(), 15);
+}
+
 }  // namespace
 }  // namespace mcslam

@@ -149,6 +149,26 @@ std::vector<uint8_t> Edited(const std::function<void(nlohmann::json&)>& edit) {
   return nlohmann::json::to_cbor(j);
 }
 
+TEST(MapFile, DeepNestingIsRefusedNotAStackOverflow) {
+  // A million nested one-element arrays inside "options": the CBOR reader would recurse a million times.
+  std::vector<uint8_t> bytes = nlohmann::json::to_cbor(nlohmann::json{{"format", "mcslam-map"}, {"version", 1}});
+  bytes[0] = 0xA3;  // the map now has 3 pairs: the third follows
+  const std::vector<uint8_t> key = nlohmann::json::to_cbor("options");
+  bytes.insert(bytes.end(), key.begin(), key.end());
+  bytes.insert(bytes.end(), 1'000'000, 0x81);
+  bytes.push_back(0xF6);  // null, the innermost element
+  ExpectThrowsWith([&] { ParseMapFile(bytes, "deep.map"); }, "deep.map", "nested deeper than");
+}
+
+TEST(MapFile, IdsOutOfRangeAreRefused) {
+  ExpectThrowsWith([] { ParseMapFile(Edited([](nlohmann::json& j) { j["points"][0]["id"] = -4; }), "m"); },
+                   "points[0].id", "not a point id");
+  ExpectThrowsWith([] { ParseMapFile(Edited([](nlohmann::json& j) { j["points"][0]["id"] = uint64_t{1} << 63; }), "m"); },
+                   "points[0].id", "out of range");
+  ExpectThrowsWith([] { ParseMapFile(Edited([](nlohmann::json& j) { j["keyframes"][1]["ids"][0] = -1; }), "m"); },
+                   "keyframes[1].ids", "not a feature id");
+}
+
 TEST(MapFile, ANewerVersionSaysSo) {
   ExpectThrowsWith([] { ParseMapFile(Edited([](nlohmann::json& j) { j["version"] = kMapFormatVersion + 1; }), "new.map"); },
                    "new.map", "newer than this mcslam reads");

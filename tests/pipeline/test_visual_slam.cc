@@ -172,7 +172,11 @@ TEST(VisualSlamMap, AMapLoadedAndSavedAgainIsTheSameFile) {
   again.options = map.options;
   EXPECT_EQ(io::SerialiseMapFile(again), bytes);
   // New tracks are numbered above every id of the map, so that none is taken for a map point.
-  EXPECT_GT(second.frontend().NextFeatureId(), map.points.back().id);
+  int64_t max_id = 0;
+  for (const io::MapFilePoint& p : map.points) max_id = std::max(max_id, p.id);
+  for (const io::MapFileKeyframe& k : map.keyframes)
+    for (int64_t id : k.feature_ids) max_id = std::max(max_id, id);
+  EXPECT_GT(second.frontend().NextFeatureId(), max_id);
 }
 
 TEST(VisualSlamMap, AMapIsRefusedWhereItCannotBeUsed) {
@@ -196,7 +200,14 @@ TEST(VisualSlamMap, AMapIsRefusedWhereItCannotBeUsed) {
     EXPECT_NE(std::string(e.what()).find("another camera"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("fx"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(vs.LoadMap(vs.ExportMap()), std::invalid_argument);  // after frames, whatever the map
+  // After frames, even a good map (the one of the test above) is refused, and nothing changes.
+  const Scene longer(40, 1);
+  VisualSlam mapped = Make(longer);
+  for (int i = 0; i < 40; ++i) mapped.Process(longer.Frame(i), i, i / kFps);
+  ASSERT_TRUE(mapped.system().initialised());
+  const io::MapFile good = mapped.ExportMap();
+  EXPECT_THROW(vs.LoadMap(good), std::logic_error);
+  EXPECT_FALSE(vs.system().initialised());
 }
 
 TEST(VisualSlamOptions, CheckNamesTheField) {
