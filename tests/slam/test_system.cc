@@ -340,7 +340,9 @@ TEST(System, OneSeedDrivesEveryDraw) {
   bool differs = ra.reports.size() != rc.reports.size();
   for (size_t i = 0; i < ra.reports.size(); ++i) {
     ASSERT_EQ(ra.reports[i].has_pose, rb.reports[i].has_pose) << i;
-    if (ra.reports[i].has_pose) EXPECT_EQ(ra.reports[i].cam_from_world.t, rb.reports[i].cam_from_world.t) << i;
+    if (ra.reports[i].has_pose) {
+      EXPECT_EQ(ra.reports[i].cam_from_world.t, rb.reports[i].cam_from_world.t) << i;
+    }
     if (!differs && ra.reports[i].has_pose && rc.reports[i].has_pose)
       differs = ra.reports[i].cam_from_world.t != rc.reports[i].cam_from_world.t;
   }
