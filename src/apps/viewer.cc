@@ -77,15 +77,9 @@ void WriteViewer(const std::string& out_dir, const std::string& html_path, const
   const fs::path traj_path = dir / "trajectory.txt";
   if (!fs::exists(traj_path, ec))
     throw std::runtime_error(fmt::format("{}: no trajectory.txt (not the --out folder of `mcslam run`?)", out_dir));
-  // A run that never initialised wrote a trajectory without poses: the page then shows what there is.
-  bool any_pose = false;
-  {
-    std::ifstream in(traj_path);
-    std::string line;
-    while (!any_pose && std::getline(in, line))
-      any_pose = line.find_first_not_of(" \t\r") != std::string::npos && line[line.find_first_not_of(" \t\r")] != '#';
-  }
-  const io::Trajectory traj = any_pose ? io::ReadTrajectory(traj_path.string()) : io::Trajectory{};
+  // trajectory.txt is TUM (what `run` writes); a run that never initialised wrote one without poses, which the
+  // TUM reader takes as an empty trajectory (the format-detecting reader would refuse it).
+  const io::Trajectory traj = io::ReadTum(traj_path.string());
   io::PointCloud cloud;
   if (fs::exists(dir / "map.ply", ec)) cloud = io::ReadPly((dir / "map.ply").string());
   const std::string three = ReadWhole(fs::path(options.three_dir) / "three.min.js",
@@ -101,12 +95,12 @@ void WriteViewer(const std::string& out_dir, const std::string& html_path, const
   if (cols.count("index") && cols.count("stamp")) {
     const auto& idx = cols.at("index");
     const auto& stamp = cols.at("stamp");
-    std::vector<std::pair<double, size_t>> rows;
-    for (size_t r = 0; r < idx.size(); ++r) rows.emplace_back(Number(stamp[r]), r);
+    std::map<double, size_t> row_of_stamp;  // one row a frame, so one a stamp
+    for (size_t r = 0; r < idx.size(); ++r)
+      if (const double t = Number(stamp[r]); std::isfinite(t)) row_of_stamp.emplace(t, r);
     for (size_t i = 0; i < traj.size(); ++i) {
-      auto it = std::find_if(rows.begin(), rows.end(),
-                             [&](const auto& row) { return std::abs(row.first - traj.stamps_s[i]) < 1e-6; });
-      if (it == rows.end()) continue;
+      const auto it = row_of_stamp.lower_bound(traj.stamps_s[i] - 1e-6);
+      if (it == row_of_stamp.end() || it->first > traj.stamps_s[i] + 1e-6) continue;
       frame_of_pose[i] = static_cast<int64_t>(Number(idx[it->second]));
       if (cols.count("keyframe")) keyframe[i] = cols.at("keyframe")[it->second] == "1";
     }

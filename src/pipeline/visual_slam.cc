@@ -226,27 +226,39 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     int64_t track;
     Eigen::Vector2d uv;
   };
+  // The frame's tracks that are no map point: each one's descriptor and its match among the last looks, found
+  // once for both passes below.
+  struct Candidate {
+    const frontend::TrackedFeature* feature;
+    frontend::Descriptor descriptor;
+    std::optional<frontend::DescriptorMatch> last;
+  };
+  std::vector<Candidate> candidates;
+  std::vector<slam::RelocalisationMatch> tracked;  // tracks that are map points: matched by their ids
+  for (const frontend::TrackedFeature& f : fr.features) {
+    if (!Removed(system_.map().Find(f.feature_id))) {
+      tracked.push_back({f.feature_id, f.uv_px});
+      continue;
+    }
+    if (map_side.size() < 2) continue;
+    if (const std::optional<frontend::Descriptor> d = frontend_.GetDescriptor(f.feature_id))
+      candidates.push_back({&f, *d, frontend::MatchDescriptor(*d, looks, match_options)});
+  }
   std::vector<slam::RelocalisationMatch> matches;
   std::vector<std::pair<int64_t, int64_t>> relabel;  // track id, map point id
   auto match = [&](bool with_first_looks) {
     std::map<int64_t, Match> best_for_point;  // ordered: the same matches in the same order every run
-    matches.clear();
+    matches = tracked;
     relabel.clear();
-    for (const frontend::TrackedFeature& f : fr.features) {
-      if (!Removed(system_.map().Find(f.feature_id))) {
-        matches.push_back({f.feature_id, f.uv_px});
-        continue;
-      }
-      if (map_side.size() < 2) continue;
-      const std::optional<frontend::Descriptor> d = frontend_.GetDescriptor(f.feature_id);
-      if (!d) continue;
-      std::optional<frontend::DescriptorMatch> m = frontend::MatchDescriptor(*d, looks, match_options);
+    for (const Candidate& c : candidates) {
+      std::optional<frontend::DescriptorMatch> m = c.last;
       size_t point = m ? m->index : 0;
       if (with_first_looks)
-        if (const std::optional<frontend::DescriptorMatch> m_first = frontend::MatchDescriptor(*d, first_looks, match_options);
+        if (const std::optional<frontend::DescriptorMatch> m_first = frontend::MatchDescriptor(c.descriptor, first_looks, match_options);
             m_first && (!m || m_first->distance < m->distance))
           m = m_first, point = first_of[m_first->index];
       if (!m) continue;
+      const frontend::TrackedFeature& f = *c.feature;
       const auto [it, fresh] = best_for_point.try_emplace(map_side[point].first, Match{m->distance, f.feature_id, f.uv_px});
       if (!fresh && m->distance < it->second.distance) it->second = {m->distance, f.feature_id, f.uv_px};
     }
