@@ -187,7 +187,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   }
   WriteFramesCsv((out / "frames.csv").string(), res.reports, err);
 
-  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0;
+  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0, provisional = 0;
   std::vector<double> ms;
   for (const auto& r : res.reports) {
     tracked += r.status == slam::FrameStatus::kTracked;
@@ -195,6 +195,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
     waiting += r.status == slam::FrameStatus::kWaitingForInit;
     keyframes += r.keyframe;
     rotation_only += r.rotation_only;
+    provisional += r.provisional;
     if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
   }
   const double fps = res.reports.size() / std::max(res.times.wall_s, 1e-9);
@@ -211,6 +212,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   j["not_initialised"] = waiting;
   j["keyframes"] = keyframes;
   j["rotation_only"] = rotation_only;  // of the tracked: posed by their turn about the last centre
+  j["provisional"] = provisional;      // of the tracked: posed in a provisional map (a bridge over the unmapped)
   j["map_points"] = res.map.points.size();
   j["initialised"] = res.initialised;
   j["initialisation"] = nullptr;

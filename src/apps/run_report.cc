@@ -175,8 +175,10 @@ void ImageRun::WriteReport() {
     features_sum += row.features;
   }
   int64_t rotation_only = 0;  // of the tracked: posed by their turn about the last centre (the map out of view)
+  int64_t provisional = 0;    // of the tracked: posed in a provisional map (a bridge over the unmapped)
   for (const slam::FrameReport& r : reports) {
     rotation_only += r.rotation_only;
+    provisional += r.provisional;
     sum.tracked += r.status == slam::FrameStatus::kTracked;
     sum.lost += r.status == slam::FrameStatus::kLost;
     sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
@@ -226,6 +228,7 @@ void ImageRun::WriteReport() {
   j["not_initialised"] = sum.not_initialised;
   j["keyframes"] = sum.keyframes;
   j["rotation_only"] = rotation_only;
+  j["provisional"] = provisional;
   j["map_points"] = sum.map_points;
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);

@@ -119,6 +119,10 @@ constexpr const char* kApp = R"JS(
   }
   if (D.ground_truth) line(D.ground_truth, colours.gt);
   const est = line(T.positions, colours.est);
+  // The estimate over what lies about it (the aligned ground truth along the same path, the keyframes' frusta):
+  // drawn last and whatever the depth, it is never hidden by the lines it nearly coincides with.
+  est.material.depthTest = false;
+  est.renderOrder = 1;
   const currentGeom = new THREE.BufferGeometry();
   currentGeom.setAttribute('position', new THREE.Float32BufferAttribute(new Array(48).fill(0), 3));
   // These two change geometry as the slider moves: their bounding spheres would be stale, so never culled.

@@ -134,8 +134,12 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
   std::vector<frontend::RemapRequest> requests;
   if (!system_.initialised() || !latest_cam_from_world_) return requests;
   std::vector<std::pair<int64_t, const slam::MapPoint*>> lost_points;
+  // While a provisional map is tracked, the latest pose is at its scale: the rest of the map would be looked for
+  // in the wrong places (and found there, wrongly); it is found by relocalisation instead.
   for (const slam::MapPoint& p : system_.map().points())
-    if (p.state == slam::PointState::kLost && lost_descriptors_.count(p.id)) lost_points.emplace_back(p.last_seen_frame, &p);
+    if (p.state == slam::PointState::kLost && lost_descriptors_.count(p.id) &&
+        (!system_.bridging() || system_.Provisional(p.id)))
+      lost_points.emplace_back(p.last_seen_frame, &p);
   std::sort(lost_points.begin(), lost_points.end(), [](const auto& a, const auto& b) {
     return a.first > b.first || (a.first == b.first && a.second->id < b.second->id);
   });
@@ -166,7 +170,9 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
 
   step.before_init = !system_.initialised();
   FrameObservations obs = frontend::ToObservations(fr);
-  if (options_.relocalise && (was_lost_ || after_gap_) && system_.initialised()) {
+  // While the System tracks a provisional map (a bridge over the unmapped), every frame is also matched against
+  // the map it must join.
+  if (options_.relocalise && (was_lost_ || after_gap_ || system_.bridging()) && system_.initialised()) {
     const auto t_reloc = Clock::now();
     Relocalise(fr, &obs, &step);
     step.reloc_ms = MsSince(t_reloc);
@@ -195,7 +201,8 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
 
   std::vector<std::tuple<int64_t, int64_t, const frontend::Descriptor*>> recent;  // last seen, id, look
   for (const auto& [id, d] : lost_descriptors_)
-    if (const slam::MapPoint* p = system_.map().Find(id); !Removed(p)) recent.emplace_back(p->last_seen_frame, id, &d);
+    if (const slam::MapPoint* p = system_.map().Find(id); !Removed(p) && !system_.Provisional(id))
+      recent.emplace_back(p->last_seen_frame, id, &d);
   std::sort(recent.begin(), recent.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b) : std::get<1>(a) < std::get<1>(b);
   });

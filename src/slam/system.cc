@@ -200,6 +200,11 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     out.assign(1, r);
     return out;
   }
+  if (bridge_ && !bridge_->built) {
+    if (!frame.pose_hint) return TryBridge(slot);
+    bridge_.reset();  // relocalised in the map itself before a provisional map was made: none is needed
+  }
+  if (bridging() && frame.pose_hint) return JoinBridge(slot, *frame.pose_hint);
   out.push_back(TrackFrame(slot, frame.pose_hint));
   if (settling_ && out.front().status == FrameStatus::kTracked &&
       ParallaxFromReference(slot) >= next_settle_parallax_deg_) {

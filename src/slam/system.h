@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "compute/point_kernel.h"
@@ -160,6 +161,16 @@ struct SystemOptions {
   bool rotation_only = true;
   int rotation_only_min_tracks = 20;
   double rotation_only_min_ratio = 0.7;
+  // A bridge over the unmapped: when a turn that took the map out of view ends in a move (the rotation-only
+  // tracking above refuses the frame), the camera goes on where nothing is mapped and would stay lost until the
+  // map comes back into view. A provisional map is made instead from two views, as the initialisation makes the
+  // first one, anchored at the turn's last frame (its pose is known, so only the scale is free): its scale is
+  // guessed so that its points lie as deep as the map's did before the turn. Tracking and mapping go on in it;
+  // when the caller relocalises a frame against the rest of the map (it tries each frame while bridging()), the
+  // provisional map and the frames posed in it are scaled about the anchor's centre so that the frame's two
+  // poses agree, and it becomes part of the map. A provisional map whose tracking fails first leaves the map
+  // (its frames keep their poses). docs/rotation_only.md.
+  bool bridge = true;
   void Check() const;
 };
 
@@ -201,6 +212,7 @@ struct FrameReport {
   double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
   std::string note;             // why lost / waiting; how posed when not by the pose step
   bool rotation_only = false;   // tracked by its rotation about the last centre (SystemOptions::rotation_only)
+  bool provisional = false;     // posed in a provisional map whose scale was guessed (SystemOptions::bridge)
   // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
   // ambiguity), as opposed to no initialisation being possible yet.
   bool init_rejected = false;
@@ -234,6 +246,10 @@ class System {
   bool initialised() const { return initialised_; }
   // Some frame has a pose: false before the initialisation, and in a loaded map before its first relocalisation.
   bool localised() const { return last_posed_slot_ >= 0; }
+  // A provisional map is being tracked (SystemOptions::bridge): the caller should try to relocalise every frame
+  // against the rest of the map (Relocalise leaves the provisional points out) and pass the pose as its hint.
+  bool bridging() const { return bridge_ && bridge_->built; }
+  bool Provisional(int64_t point_id) const { return bridging() && bridge_->points.count(point_id) > 0; }
   const Map& map() const { return map_; }
   const PinholeCamera& camera() const { return camera_; }
 
@@ -261,6 +277,13 @@ class System {
   std::optional<InitHypothesis> RefineInitWindow(const std::vector<int>& window, const std::optional<Pose>& last_from_ref,
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
                                                  std::string* failure, bool check_parallax = true) const;
+  // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
+  // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
+  // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).
+  std::optional<InitHypothesis> SolveInitWindow(const std::vector<int>& window, const std::vector<Eigen::Vector2d>& n1,
+                                                const std::vector<Eigen::Vector2d>& n2, const std::vector<int64_t>& ids,
+                                                int need_inliers, int need_points, std::string* why,
+                                                bool* rejected) const;
   double ParallaxFromReference(int slot) const;
   // The points seen at least twice among some frames (slots), and their observations, for a bundle adjustment.
   struct WindowPoints {
@@ -334,6 +357,26 @@ class System {
   Eigen::Vector3d panorama_centre_ = Eigen::Vector3d::Zero();
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
+  // The bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is found again.
+  struct Bridge {
+    int anchor_slot = -1;      // the turn's last frame: its pose is the provisional map's reference
+    double depth_prior = 0;    // the map's median depth before the turn: the guessed scale
+    bool built = false;        // the provisional map exists (before: waiting for two views that make one)
+    std::unordered_set<int64_t> points;  // its points
+  };
+  std::optional<Bridge> bridge_;
+  // Map points (only the provisional map's, when asked) that project into the image at this pose.
+  int MapPointsInView(const Pose& cam_from_world, bool provisional_only = false) const;
+  // After a turn ended in a move at `slot`: a bridge anchored at the turn's last frame; false (and no bridge)
+  // when the map's depth before the turn cannot be measured.
+  bool StartBridge(int slot);
+  // Waiting for the provisional map: its two-view solution between the anchor and `slot`. The reports of the
+  // frames it poses, or this frame's 'lost' report saying why not yet.
+  std::vector<FrameReport> TryBridge(int slot);
+  // A frame relocalised against the map while bridging: tracked in the provisional map, which is then scaled to
+  // agree and joins the map.
+  std::vector<FrameReport> JoinBridge(int slot, const Pose& cam_from_world);
+  void AbandonBridge(int64_t frame_index);
 };
 
 }  // namespace mcslam::slam

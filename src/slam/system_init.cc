@@ -308,6 +308,133 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   return h;
 }
 
+std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<int>& window,
+                                                              const std::vector<Eigen::Vector2d>& n1,
+                                                              const std::vector<Eigen::Vector2d>& n2,
+                                                              const std::vector<int64_t>& ids, int need_inliers,
+                                                              int need_points, std::string* why, bool* rejected) const {
+  const InitOptions& io = options_.init;
+  auto fail = [&](std::string s, bool ambiguous) -> std::optional<InitHypothesis> {
+    *why = std::move(s);
+    *rejected = ambiguous;
+    return std::nullopt;
+  };
+  // Two-view hypotheses: the 8-point method with two RANSAC seeds, OpenCV's 5-point method, and, when a
+  // homography explains the views (a dominant plane), the motions of its decomposition. Each places every
+  // frame of the window by PnP against its points and is refined by one bundle adjustment over the whole
+  // window; the one that explains the window best is kept. With a narrow field of view two views leave a
+  // near-free bas-relief direction and sometimes a twisted pair; a wrong basin cannot explain tens of views
+  // as well as the right one.
+  const double focal = focal_px_;
+  std::string last_failure;
+  geometry::TwoViewOptions tv;
+  tv.ransac_threshold_px = io.ransac_threshold_px;
+  tv.focal_px = focal;
+  tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+  std::vector<geometry::TwoViewResult> seeds;
+  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
+                                                                   {io.method, options_.seed + 1},
+                                                                   {geometry::EssentialMethod::kFivePointOpenCV, 0},
+                                                                   {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
+  bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
+  bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
+  bool planar = false;            // a homography explains the views
+  for (const auto& [method, seed] : tries) {
+    if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
+    if (method == geometry::EssentialMethod::kFivePointOpenCV) {
+      if (five_point_tried) continue;
+      five_point_tried = true;
+    }
+    tv.method = method;
+    tv.seed = seed;
+    geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
+    if (!tvr.ok) {
+      last_failure = "two-view geometry failed: " + tvr.failure;
+      planar |= tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
+      // Only a refusal of the data itself (too few, NaN, planar or pure rotation) holds for every seed.
+      const bool data_refused = tvr.status == geometry::TwoViewStatus::kBadInput ||
+                                tvr.status == geometry::TwoViewStatus::kTooFewCorrespondences ||
+                                tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
+      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint && data_refused;
+      continue;
+    }
+    seeds.push_back(std::move(tvr));
+  }
+  const size_t num_essential_seeds = seeds.size();
+  if (planar)
+    for (geometry::TwoViewResult& tvr : geometry::EstimateTwoViewPlanar(n1, n2, tv)) seeds.push_back(std::move(tvr));
+
+  std::vector<InitHypothesis> refined;
+  for (size_t k = 0; k < seeds.size(); ++k) {
+    const geometry::TwoViewResult& tvr = seeds[k];
+    const bool passes = tvr.num_inliers >= need_inliers && tvr.num_triangulated >= need_points &&
+                        tvr.median_parallax_deg >= io.min_median_parallax_deg;
+    if (!passes)
+      last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
+                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, need_inliers,
+                                 need_points, io.min_median_parallax_deg);
+    // A plane's motions are judged together: one short of the gates still stands against the other.
+    const bool planar_seed = k >= num_essential_seeds;
+    if (!passes && !planar_seed) continue;
+    std::vector<Eigen::Vector3d> points;
+    std::vector<int64_t> point_ids;
+    for (size_t i = 0; i < ids.size(); ++i)
+      if (tvr.triangulated[i]) points.push_back(tvr.points_in_cam1[i]), point_ids.push_back(ids[i]);
+    std::string refine_failure;
+    std::optional<InitHypothesis> h =
+        RefineInitWindow(window, tvr.cam2_from_cam1, points, point_ids, &refine_failure, passes);
+    if (!h) {
+      if (passes) last_failure = refine_failure;
+      continue;
+    }
+    h->two_view_inliers = tvr.num_inliers;
+    h->two_view_parallax_deg = tvr.median_parallax_deg;
+    h->eligible = passes;
+    refined.push_back(std::move(*h));
+  }
+  auto cheapest = [&] {
+    auto best_it = refined.end();
+    for (auto it = refined.begin(); it != refined.end(); ++it)
+      if (it->eligible && (best_it == refined.end() || it->cost < best_it->cost)) best_it = it;
+    return best_it;
+  };
+  if (cheapest() == refined.end()) return fail(last_failure, false);
+  // The depth-reversal (Necker) ambiguity: seen through a narrow field of view, a scene and its mirror image
+  // in depth, with the cameras turned the other way, project nearly alike. The mirror of the winner is refined
+  // too and competes with the rest.
+  {
+    const InitHypothesis& winner = *cheapest();
+    // Refined whatever its parallax: short of it, it still stands against the winner.
+    if (std::optional<InitHypothesis> mirror = RefineInitWindow(window, std::nullopt, MirrorInDepth(winner.points),
+                                                                winner.point_ids, nullptr, /*check_parallax=*/false)) {
+      mirror->two_view_inliers = winner.two_view_inliers;
+      mirror->two_view_parallax_deg = winner.two_view_parallax_deg;
+      mirror->mirrored = true;
+      mirror->eligible = mirror->parallax_ok;
+      refined.push_back(std::move(*mirror));
+    }
+  }
+  // Ambiguity: another solution with another structure (its points' depths not in step with the winner's: the
+  // depth-reversed mirror, the plane's twin) explains the window about as well. The views cannot tell them
+  // apart yet: wait for more motion rather than risk a wrong (mirrored, twisted) map.
+  std::optional<InitHypothesis> best = *cheapest();
+  for (const InitHypothesis& h : refined) {
+    const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||
+                          AngularDistanceDeg(best->poses.back().q, h.poses.back().q) > kSameRotationDeg;
+    // How much worse it explains the window, as a chi-square: the summed squared residuals' difference over
+    // the window's noise variance (the best solution's mean squared residual, at least the floor's).
+    const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
+    if (distinct && chi2 < io.ambiguity_chi2) {
+      return fail(fmt::format("ambiguous initialisation: {} explains the window about as well as the best solution "
+                              "(mean squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
+                              h.mirrored ? "its mirror in depth" : "another solution with another structure",
+                              h.cost, best->cost),
+                  true);
+    }
+  }
+  return best;
+}
+
 bool System::TryInitialise(std::vector<FrameReport>* out) {
   const InitOptions& io = options_.init;
   const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
@@ -365,124 +492,20 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   if (med_motion < io.min_median_motion_deg)
     return note(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
 
-  // Two-view hypotheses: the 8-point method with two RANSAC seeds, OpenCV's 5-point method, and, when a
-  // homography explains the views (a dominant plane), the motions of its decomposition. Each places every
-  // frame of the window by PnP against its points and is refined by one bundle adjustment over the whole
-  // window; the one that explains the window best is kept. With a narrow field of view two views leave a
-  // near-free bas-relief direction and sometimes a twisted pair; a wrong basin cannot explain tens of views
-  // as well as the right one.
+  // The window: every frame from the reference to this one.
   std::vector<int> window;
   for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
   if (static_cast<int>(window.size()) < io.min_window_frames)
     return note(fmt::format("{} frames since the reference (the window needs {}: two views leave the depth "
                             "reversal open)",
                             window.size(), io.min_window_frames));
-  const double focal = focal_px_;
-  std::string last_failure;
-  geometry::TwoViewOptions tv;
-  tv.ransac_threshold_px = io.ransac_threshold_px;
-  tv.focal_px = focal;
-  tv.max_reprojection_px = options_.mapping.max_reprojection_px;
-  std::vector<geometry::TwoViewResult> seeds;
-  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
-                                                                   {io.method, options_.seed + 1},
-                                                                   {geometry::EssentialMethod::kFivePointOpenCV, 0},
-                                                                   {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
-  bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
-  bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
-  bool planar = false;            // a homography explains the views
-  for (const auto& [method, seed] : tries) {
-    if (eight_point_failed && method == geometry::EssentialMethod::kEightPoint) continue;
-    if (method == geometry::EssentialMethod::kFivePointOpenCV) {
-      if (five_point_tried) continue;
-      five_point_tried = true;
-    }
-    tv.method = method;
-    tv.seed = seed;
-    geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
-    if (!tvr.ok) {
-      last_failure = "two-view geometry failed: " + tvr.failure;
-      planar |= tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
-      // Only a refusal of the data itself (too few, NaN, planar or pure rotation) holds for every seed.
-      const bool data_refused = tvr.status == geometry::TwoViewStatus::kBadInput ||
-                                tvr.status == geometry::TwoViewStatus::kTooFewCorrespondences ||
-                                tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
-      eight_point_failed |= method == geometry::EssentialMethod::kEightPoint && data_refused;
-      continue;
-    }
-    seeds.push_back(std::move(tvr));
-  }
-  const size_t num_essential_seeds = seeds.size();
-  if (planar)
-    for (geometry::TwoViewResult& tvr : geometry::EstimateTwoViewPlanar(n1, n2, tv)) seeds.push_back(std::move(tvr));
-
-  std::vector<InitHypothesis> refined;
-  for (size_t k = 0; k < seeds.size(); ++k) {
-    const geometry::TwoViewResult& tvr = seeds[k];
-    const bool passes = tvr.num_inliers >= need_inliers && tvr.num_triangulated >= need_points &&
-                        tvr.median_parallax_deg >= io.min_median_parallax_deg;
-    if (!passes)
-      last_failure = fmt::format("two-view: {} inliers, {} points, median parallax {:.2f} deg (need {}, {}, {:.2f})",
-                                 tvr.num_inliers, tvr.num_triangulated, tvr.median_parallax_deg, need_inliers,
-                                 need_points, io.min_median_parallax_deg);
-    // A plane's motions are judged together: one short of the gates still stands against the other.
-    const bool planar_seed = k >= num_essential_seeds;
-    if (!passes && !planar_seed) continue;
-    std::vector<Eigen::Vector3d> points;
-    std::vector<int64_t> point_ids;
-    for (size_t i = 0; i < ids.size(); ++i)
-      if (tvr.triangulated[i]) points.push_back(tvr.points_in_cam1[i]), point_ids.push_back(ids[i]);
-    std::string why;
-    std::optional<InitHypothesis> h = RefineInitWindow(window, tvr.cam2_from_cam1, points, point_ids, &why, passes);
-    if (!h) {
-      if (passes) last_failure = why;
-      continue;
-    }
-    h->two_view_inliers = tvr.num_inliers;
-    h->two_view_parallax_deg = tvr.median_parallax_deg;
-    h->eligible = passes;
-    refined.push_back(std::move(*h));
-  }
-  auto cheapest = [&] {
-    auto best_it = refined.end();
-    for (auto it = refined.begin(); it != refined.end(); ++it)
-      if (it->eligible && (best_it == refined.end() || it->cost < best_it->cost)) best_it = it;
-    return best_it;
-  };
-  if (cheapest() == refined.end()) return note(last_failure);
-  // The depth-reversal (Necker) ambiguity: seen through a narrow field of view, a scene and its mirror image
-  // in depth, with the cameras turned the other way, project nearly alike. The mirror of the winner is refined
-  // too and competes with the rest.
-  {
-    const InitHypothesis& winner = *cheapest();
-    // Refined whatever its parallax: short of it, it still stands against the winner.
-    if (std::optional<InitHypothesis> mirror = RefineInitWindow(window, std::nullopt, MirrorInDepth(winner.points),
-                                                                winner.point_ids, nullptr, /*check_parallax=*/false)) {
-      mirror->two_view_inliers = winner.two_view_inliers;
-      mirror->two_view_parallax_deg = winner.two_view_parallax_deg;
-      mirror->mirrored = true;
-      mirror->eligible = mirror->parallax_ok;
-      refined.push_back(std::move(*mirror));
-    }
-  }
-  // Ambiguity: another solution with another structure (its points' depths not in step with the winner's: the
-  // depth-reversed mirror, the plane's twin) explains the window about as well. The views cannot tell them
-  // apart yet: wait for more motion rather than risk a wrong (mirrored, twisted) map.
-  std::optional<InitHypothesis> best = *cheapest();
-  for (const InitHypothesis& h : refined) {
-    const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||
-                          AngularDistanceDeg(best->poses.back().q, h.poses.back().q) > kSameRotationDeg;
-    // How much worse it explains the window, as a chi-square: the summed squared residuals' difference over
-    // the window's noise variance (the best solution's mean squared residual, at least the floor's).
-    const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
-    if (distinct && chi2 < io.ambiguity_chi2) {
-      note(fmt::format("ambiguous initialisation: {} explains the window about as well as the best solution (mean "
-                       "squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
-                       h.mirrored ? "its mirror in depth" : "another solution with another structure", h.cost,
-                       best->cost));
-      out->front().init_rejected = true;
-      return false;
-    }
+  std::string why;
+  bool rejected = false;
+  std::optional<InitHypothesis> best = SolveInitWindow(window, n1, n2, ids, need_inliers, need_points, &why, &rejected);
+  if (!best) {
+    note(why);
+    out->front().init_rejected = rejected;
+    return false;
   }
 
   // Gauge: the reference camera is the world; the first baseline has length 1, or the true length when

@@ -112,6 +112,7 @@ int System::TriangulateNewPoints(int slot, int inliers) {
       *existing = p;
     else
       map_.Add(p);
+    if (bridging()) bridge_->points.insert(p.id);
     ++added;
   }
   return added;

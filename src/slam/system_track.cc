@@ -38,6 +38,8 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   for (const FeatureUndistorted& f : fr.features) {
     MapPoint* p = map_.Find(f.id);
     if (!p || p->state == PointState::kRemoved) continue;
+    // In a provisional map the rest of the map is at another scale: it only joins by relocalisation.
+    if (bridging() && !Provisional(f.id)) continue;
     obs.push_back({p->position_in_world, f.uv_px, p->inlier});
     pts.push_back(p);
   }
@@ -58,7 +60,9 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   r.inliers = est.inliers;
   if (!est.tracked) {
     for (MapPoint* p : pts) p->inlier = true;  // everyone gets another chance in the next frame
+    const bool turning = !panorama_bearings_.empty();
     if (!pose_hint && options_.rotation_only && TrackRotationOnly(slot, &r)) {
+      r.provisional = bridging();  // a turn in a provisional map: its scale is the provisional one
       r.track_ms = Ms(t0);
       MarkSeen(slot);
       r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
@@ -66,6 +70,13 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
     }
     r.status = FrameStatus::kLost;
     r.note = est.lost_reason + (r.note.empty() ? "" : "; " + r.note);
+    if (bridging()) {
+      r.note += "; the provisional map is lost, its points leave the map";
+      AbandonBridge(fr.index);
+    }
+    // A turn that ended in a move, the map out of view: a bridge over what is not mapped.
+    if (options_.bridge && turning && !pose_hint && !settling_ && last_posed_slot_ == slot - 1 && StartBridge(slot))
+      r.note += fmt::format("; a provisional map will be made from frame {}", map_.frames[slot - 1].index);
     MarkSeen(slot);
     r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
     return r;
@@ -80,6 +91,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   panorama_bearings_.clear();  // the pose step has points again: a later turn starts afresh
   r.status = FrameStatus::kTracked;
   r.has_pose = true;
+  r.provisional = bridging();
   r.cam_from_world = est.cam_from_world;
   // A relocalised pose may be far from where the smoother's state is: it starts again there.
   if (pose_hint) smoother_.Reset();
@@ -182,12 +194,8 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
   // 22 of 30 tracks agreeing, sent what followed 0.7 m astray).
   const Eigen::Quaterniond q(rot.cam_from_ref);
   const Pose turned(q, -(q * panorama_centre_));
-  int in_view = 0;
-  for (const MapPoint& p : map_.points()) {
-    Eigen::Vector2d uv;
-    if (p.state != PointState::kRemoved && ideal_.ProjectWorld(turned, p.position_in_world, &uv) && ideal_.InImage(uv))
-      ++in_view;
-  }
+  // In a provisional map, only its own points count: the rest of the map is at another scale.
+  const int in_view = MapPointsInView(turned, /*provisional_only=*/bridging());
   if (in_view >= options_.rotation_only_min_tracks) {
     r->note = fmt::format("no turn about the last centre: {} map points would be in view", in_view);
     panorama_bearings_.clear();
@@ -221,6 +229,7 @@ std::optional<Relocalisation> System::Relocalise(const std::vector<Relocalisatio
   for (const RelocalisationMatch& m : matches) {
     const MapPoint* p = map_.Find(m.point_id);
     if (!p || p->state == PointState::kRemoved || !m.uv_px.allFinite()) continue;
+    if (Provisional(m.point_id)) continue;  // only the map the provisional one joins
     const Eigen::Vector2d u = camera_.UndistortPixel(m.uv_px);
     if (!u.allFinite()) continue;
     obs.push_back({p->position_in_world, u, true});

@@ -326,6 +326,35 @@ GapRun RunOverAGap(const std::string& scenario, const std::string& out, const st
   return g;
 }
 
+// The rendered rotation scenario: the camera pans away from everything mapped (a turn, tracked about the last
+// centre), moves on through the unmapped half of the room, and pans back. Before the bridge every frame of the
+// move was lost (202 and 205 of 270 frames tracked on seeds 1 and 3); now a provisional map made from two views
+// at the turn's end carries the track, and joins the map when the pan back relocalises a frame against it: its
+// scale was guessed 0.936x and 1.368x of the map's (the ratio the join applied). Measured 270 / 270 frames tracked
+// on both seeds, ATE 6.7 / 1.4 cm (2.1 % / 0.43 % of the 3.1 / 3.3 m path; seeds 4-10: 1.2-5.1 cm). Bounds: every
+// frame tracked but 3; ATE under 12 cm (1.8x the worst measured). Seed 2 is not used: its map is lost before the
+// first turn ends (22 map points still in view refuse the turn), which the bridge does not address.
+TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
+  for (const int seed : {1, 3}) {
+    TempDir dir;
+    const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed {} --render --out {}", seed, dir / "s"));
+    ASSERT_EQ(s.exit_code, 0) << s.output;
+    const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed {} --out {}", dir / "s", seed, dir / "r"));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_GE(Field(r.output, "tracked"), 267) << "seed " << seed << ": " << r.output;
+    EXPECT_LT(Field(r.output, "ate_rmse"), 0.12) << "seed " << seed << ": " << r.output;
+    const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+    EXPECT_GT(report["provisional"].get<int>(), 20) << "seed " << seed;
+    int made = 0, joined = 0;
+    for (const std::string& note : testing::CsvColumn(dir / "r/frames.csv", "note")) {
+      made += note.find("provisional map from frames") != std::string::npos;
+      joined += note.find("the provisional map joins it") != std::string::npos;
+    }
+    EXPECT_EQ(made, 1) << "seed " << seed;
+    EXPECT_EQ(joined, 1) << "seed " << seed;
+  }
+}
+
 TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
   TempDir dir;
   const auto s = RunMcslam("synth --scenario paper --seed 1 --render --frames 170 --out " + dir / "s");
