@@ -61,6 +61,7 @@ bool System::StartBridge(int slot) {
 }
 
 void System::AbandonBridge(int64_t frame_index) {
+  settling_ = false;
   for (int64_t id : bridge_->points)
     if (MapPoint* p = map_.Find(id); p && p->state != PointState::kRemoved) {
       p->state = PointState::kRemoved;
@@ -143,6 +144,15 @@ std::vector<FrameReport> System::TryBridge(int slot) {
     map_.keyframes.push_back(window[w]);
   }
   bridge_->built = true;
+  // Settled as the first map is (InitOptions::settle_parallax_deg): the provisional map's frames and points refined
+  // together as the parallax from the anchor grows, the anchor held and the first baseline keeping its length.
+  reference_slot_ = a;
+  posed_from_ = a;
+  init_slot_ = slot;
+  init_baseline_ = (cur.cam_from_world.OriginOfTargetInSource() - anchor.cam_from_world.OriginOfTargetInSource()).norm();
+  init_min_points_ = lowered(io.min_points);
+  settling_ = io.settle_parallax_deg > 0;
+  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
   last_posed_slot_ = slot;
   panorama_bearings_.clear();
   MarkSeen(slot);
@@ -194,6 +204,7 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
     r.note += (r.note.empty() ? "" : "; ") + fmt::format("relocalised in the map but not joined: {}", refused);
     return {r};
   }
+  settling_ = false;
   // Scale the provisional map about the anchor's centre.
   auto scaled = [&](const Eigen::Vector3d& x) -> Eigen::Vector3d { return c_anchor + ratio * (x - c_anchor); };
   for (int64_t id : bridge_->points)

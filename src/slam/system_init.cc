@@ -109,8 +109,12 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
                        ? 0.0
                        : (cams[init_it - window.begin()].OriginOfTargetInSource() - cams.front().OriginOfTargetInSource()).norm();
   const double s = b > 1e-12 ? init_baseline_ / b : 1.0;
-  for (Pose& c : cams) c.t *= s;
-  for (Eigen::Vector3d& x : X) x *= s;
+  // Scaled about the reference camera's centre, which stays where it is: the world's origin after the
+  // initialisation (the expressions below are then exactly t * s and x * s), the anchor's centre in a provisional
+  // map (SystemOptions::bridge). A camera x_c = q X + t seeing the world scaled about c0 sees x_c * s.
+  const Eigen::Vector3d c0 = cams.front().OriginOfTargetInSource();
+  for (Pose& c : cams) c.t = s * c.t + (s - 1.0) * (c.q * c0);
+  for (Eigen::Vector3d& x : X) x = c0 + s * (x - c0);
   std::unordered_map<int, Pose> moved_by;  // window slot -> new * old^-1
   for (size_t w = 0; w < window.size(); ++w) {
     moved_by[window[w]] = cams[w] * map_.frames[window[w]].cam_from_world.Inverse();
