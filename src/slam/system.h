@@ -218,6 +218,15 @@ struct FrameReport {
   bool init_rejected = false;
 };
 
+// The System's bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is
+// found again. (Outside System: clang 14 cannot construct a nested struct with member initialisers in an optional.)
+struct BridgeState {
+  int anchor_slot = -1;    // the turn's last frame: its pose is the provisional map's reference
+  double depth_prior = 0;  // the map's median depth before the turn: the guessed scale
+  bool built = false;      // the provisional map exists (before: waiting for two views that make one)
+  std::unordered_set<int64_t> points;  // its points
+};
+
 class System {
  public:
   System(const PinholeCamera& camera, const SystemOptions& options, std::unique_ptr<compute::PoseKernel> pose_kernel,
@@ -358,13 +367,7 @@ class System {
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
   // The bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is found again.
-  struct Bridge {
-    int anchor_slot = -1;      // the turn's last frame: its pose is the provisional map's reference
-    double depth_prior = 0;    // the map's median depth before the turn: the guessed scale
-    bool built = false;        // the provisional map exists (before: waiting for two views that make one)
-    std::unordered_set<int64_t> points;  // its points
-  };
-  std::optional<Bridge> bridge_;
+  std::optional<BridgeState> bridge_;
   // Map points (only the provisional map's, when asked) that project into the image at this pose.
   int MapPointsInView(const Pose& cam_from_world, bool provisional_only = false) const;
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last frame; false (and no bridge)
