@@ -152,8 +152,8 @@ struct SystemOptions {
   // When the map leaves the view while the camera only turns (a pan away from what was mapped), no point can be
   // triangulated and the pose step runs out of points. The frame is then posed by its rotation about the last
   // well-posed camera centre, from the bearings of the tracks (Wahba's problem; the rotation-only model of a
-  // panorama), while fewer than rotation_only_min_tracks map points would be in view, at least that many tracks
-  // and rotation_only_min_ratio of those shared agree within 3 sigma of the tracks' measured noise, and their
+  // panorama), while fewer than rotation_only_min_tracks of the map points it tracks are in view, at least that
+  // many tracks and rotation_only_min_ratio of those shared agree within 3 sigma of the tracks' measured noise, and their
   // residual has not grown (System::TrackRotationOnly): a camera that also moves makes the tracks disagree with
   // any rotation, and the frame is lost as before. No keyframe, no point is made from such frames; the map's pose
   // step takes over as soon as it has points again (lost ones found again by remapping near where the turn
@@ -368,8 +368,6 @@ class System {
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
   // The bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is found again.
   std::optional<BridgeState> bridge_;
-  // Map points (only the provisional map's, when asked) that project into the image at this pose.
-  int MapPointsInView(const Pose& cam_from_world, bool provisional_only = false) const;
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);

@@ -29,18 +29,6 @@ double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 }  // namespace
 
-int System::MapPointsInView(const Pose& cam_from_world, bool provisional_only) const {
-  int in_view = 0;
-  for (const MapPoint& p : map_.points()) {
-    Eigen::Vector2d uv;
-    if (p.state != PointState::kRemoved && (!provisional_only || Provisional(p.id)) &&
-        ideal_.ProjectWorld(cam_from_world, p.position_in_world, &uv) &&
-        ideal_.InImage(uv))
-      ++in_view;
-  }
-  return in_view;
-}
-
 bool System::StartBridge(int slot) {
   const int anchor = slot - 1;
   // The map's depth before the turn: the median depth of the map points that the latest frame posed by the pose

@@ -189,15 +189,22 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
     panorama_bearings_.clear();
     return false;
   }
-  // Only when the map is out of view: had the turn kept map points in the image, the pose step failed for
-  // another reason (a jolt, wrong tracks), and a turn would hide it (fast scenario, seed 3: a frame posed so,
-  // 22 of 30 tracks agreeing, sent what followed 0.7 m astray).
+  // Only when the frame sees few map points: had the turn kept tracked map points in the image, the pose step
+  // failed for another reason (a jolt, wrong tracks), and a turn would hide it (fast scenario, seed 3: a frame
+  // posed so, 22 of 30 tracks agreeing, sent what followed 0.7 m astray). Map points that would project into the
+  // image but whose tracks ended do not count: the front end has not found them again, and they kept the turn
+  // from being followed while the map left the view (rotation scenario, seed 2: 22 such points, the map lost for
+  // the rest of the turn). In a provisional map, only its own points count: the rest is at another scale.
   const Eigen::Quaterniond q(rot.cam_from_ref);
   const Pose turned(q, -(q * panorama_centre_));
-  // In a provisional map, only its own points count: the rest of the map is at another scale.
-  const int in_view = MapPointsInView(turned, /*provisional_only=*/bridging());
+  int in_view = 0;
+  for (const FeatureUndistorted& f : fr.features)
+    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved && (!bridging() || Provisional(f.id))) {
+      Eigen::Vector2d uv;
+      in_view += ideal_.ProjectWorld(turned, p->position_in_world, &uv) && ideal_.InImage(uv);
+    }
   if (in_view >= options_.rotation_only_min_tracks) {
-    r->note = fmt::format("no turn about the last centre: {} map points would be in view", in_view);
+    r->note = fmt::format("no turn about the last centre: {} tracked map points in view", in_view);
     panorama_bearings_.clear();
     return false;
   }
