@@ -1,6 +1,7 @@
 // The dataset layouts mcslam reads: KITTI odometry, TUM RGB-D, EuRoC MAV, 7-Scenes, and the folders `mcslam synth`
 // writes. Each opener finds the images, the camera and the ground truth where that layout keeps them.
 #include "io/dataset_common.h"
+#include <limits>
 
 namespace mcslam::io::detail {
 
@@ -195,6 +196,9 @@ EurocCamera ReadEurocSensorYaml(const std::string& path) {
     detail::Fail(path,
                  fmt::format("camera_model '{}' is not supported (expected pinhole)", root["camera_model"].Scalar()));
   const auto res = YamlNumbers(root["resolution"], path, "resolution", 2);
+  for (double v : res)  // an image size: checked before it becomes an int (a cast out of range is undefined)
+    if (v != std::floor(v) || v <= 0 || v > std::numeric_limits<int>::max())
+      detail::Fail(path, fmt::format("key 'resolution' must list two positive integers (got {})", v));
   const auto k = YamlNumbers(root["intrinsics"], path, "intrinsics", 4);
   EurocCamera out;
   out.camera = PinholeCamera(k[0], k[1], k[2], k[3], static_cast<int>(res[0]), static_cast<int>(res[1]));

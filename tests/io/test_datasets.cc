@@ -508,6 +508,16 @@ TEST(Datasets, EurocWrongResolutionIsCaught) {
   EXPECT_NO_THROW(OpenDataset(dir.path().string(), o));
 }
 
+// A resolution that is no image size is refused naming the file and the key, before it becomes an int (the fuzzer
+// found 2.4e22 cast: undefined behaviour).
+TEST(Datasets, EurocResolutionThatIsNoImageSizeIsAClearError) {
+  for (const std::string& resolution : {"[2.4e22, 48]", "[64, -48]", "[64.5, 48]", "[0, 48]"}) {
+    TempDir dir;
+    MakeEuroc(dir.path(), resolution);
+    ExpectThrowsWith([&] { OpenDataset(dir.path().string()); }, "sensor.yaml", "resolution");
+  }
+}
+
 // ---- synthetic --------------------------------------------------------------------------------------------
 
 TEST(Datasets, SyntheticFolderWithAndWithoutImages) {
