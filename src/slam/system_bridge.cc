@@ -167,7 +167,8 @@ std::vector<FrameReport> System::TryBridge(int slot) {
 
 std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world) {
   FrameReport r = TrackFrame(slot, std::nullopt);  // in the provisional map
-  if (!bridge_) {  // its tracking failed: the map's pose stands
+  if (!bridging()) {  // its tracking failed: the map's pose stands (and no new bridge is needed, the map is found)
+    bridge_.reset();
     std::vector<FrameReport> out{TrackFrame(slot, cam_from_world)};
     out.front().note += "; relocalised in the map after the provisional map was lost";
     return out;
