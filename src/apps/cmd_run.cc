@@ -405,6 +405,9 @@ void RegisterRun(CLI::App& app) {
                   "--min-parallax-deg says, so that the map does not run dry (0: off)")
       ->check(NonNegative())
       ->capture_default_str();
+  cmd->add_flag("--no-provisional-map{false}", args->system.bridge,
+                "After a turn that took the map out of view ends in a move, stay lost until the map is found again "
+                "instead of tracking on a provisional map that joins it then (docs/rotation_only.md)");
   cmd->add_option("--history-frames", args->system.mapping.history_frames,
                   "Frames whose features the back end keeps (older ones keep only their pose; never less than the "
                   "window reaches back)")

@@ -511,7 +511,7 @@ TEST(Datasets, EurocWrongResolutionIsCaught) {
 // A resolution that is no image size is refused naming the file and the key, before it becomes an int (the fuzzer
 // found 2.4e22 cast: undefined behaviour).
 TEST(Datasets, EurocResolutionThatIsNoImageSizeIsAClearError) {
-  for (const std::string& resolution : {"[2.4e22, 48]", "[64, -48]", "[64.5, 48]", "[0, 48]"}) {
+  for (const char* resolution : {"[2.4e22, 48]", "[64, -48]", "[64.5, 48]", "[0, 48]"}) {
     TempDir dir;
     MakeEuroc(dir.path(), resolution);
     ExpectThrowsWith([&] { OpenDataset(dir.path().string()); }, "sensor.yaml", "resolution");
