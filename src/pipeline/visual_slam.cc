@@ -137,8 +137,7 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
   // While a provisional map is tracked, the latest pose is at its scale: the rest of the map would be looked for
   // in the wrong places (and found there, wrongly); it is found by relocalisation instead.
   for (const slam::MapPoint& p : system_.map().points())
-    if (p.state == slam::PointState::kLost && lost_descriptors_.count(p.id) &&
-        (!system_.bridging() || system_.Provisional(p.id)))
+    if (p.state == slam::PointState::kLost && lost_descriptors_.count(p.id) && system_.AtCurrentScale(p.id))
       lost_points.emplace_back(p.last_seen_frame, &p);
   std::sort(lost_points.begin(), lost_points.end(), [](const auto& a, const auto& b) {
     return a.first > b.first || (a.first == b.first && a.second->id < b.second->id);

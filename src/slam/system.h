@@ -259,6 +259,9 @@ class System {
   // against the rest of the map (Relocalise leaves the provisional points out) and pass the pose as its hint.
   bool bridging() const { return bridge_ && bridge_->built; }
   bool Provisional(int64_t point_id) const { return bridging() && bridge_->points.count(point_id) > 0; }
+  // A point the pose step and the remapping may use now: any, or while a provisional map is tracked only its own
+  // (the rest of the map is at another scale).
+  bool AtCurrentScale(int64_t point_id) const { return !bridging() || Provisional(point_id); }
   const Map& map() const { return map_; }
   const PinholeCamera& camera() const { return camera_; }
 
@@ -293,6 +296,23 @@ class System {
                                                 const std::vector<Eigen::Vector2d>& n2, const std::vector<int64_t>& ids,
                                                 int need_inliers, int need_points, std::string* why,
                                                 bool* rejected) const;
+  // The features a frame shares with an earlier one that are no map point: their normalised coordinates in each,
+  // their ids, and the angle between each one's two rays (degrees, the rotation not removed).
+  struct Correspondences {
+    std::vector<Eigen::Vector2d> n1, n2;
+    std::vector<int64_t> ids;
+    std::vector<double> motion_deg;
+  };
+  Correspondences Correspond(int ref_slot, int cur_slot) const;
+  // InitOptions' shared features, inliers and points, each lowered where the frame tracks few features
+  // (min_shared_fraction of them, down to min_count_floor).
+  struct InitCounts {
+    int common, inliers, points;
+  };
+  InitCounts NeededCounts(int cur_slot) const;
+  // Settling (InitOptions::settle_parallax_deg) of a map just made from two views ending at init_slot, whose first
+  // baseline is `baseline` long, from the reference frame reference_slot_.
+  void BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points);
   double ParallaxFromReference(int slot) const;
   // The points seen at least twice among some frames (slots), and their observations, for a bundle adjustment.
   struct WindowPoints {

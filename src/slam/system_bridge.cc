@@ -73,29 +73,16 @@ std::vector<FrameReport> System::TryBridge(int slot) {
                 std::to_string(anchor.index) + "): " + why;
     return std::vector<FrameReport>{lost};
   };
-  // The tracks the anchor and this frame share that are no map point (the map is out of view).
-  std::vector<Eigen::Vector2d> n1, n2;
-  std::vector<int64_t> ids;
-  std::vector<double> motion_deg;
-  for (const FeatureUndistorted& f : cur.features) {
-    const FeatureUndistorted* g = anchor.Find(f.id);
-    const MapPoint* p = map_.Find(f.id);
-    if (!g || (p && p->state != PointState::kRemoved)) continue;
-    n1.push_back(ideal_.PixelToNormalized(g->uv_px));
-    n2.push_back(ideal_.PixelToNormalized(f.uv_px));
-    ids.push_back(f.id);
-    const Eigen::Vector3d b1 = n1.back().homogeneous().normalized(), b2 = n2.back().homogeneous().normalized();
-    motion_deg.push_back(std::atan2(b1.cross(b2).norm(), b1.dot(b2)) * 180.0 / M_PI);
-  }
-  // The counts the initialisation asks for, lowered as it lowers them where a frame tracks few features.
-  const int offered = static_cast<int>(std::ceil(io.min_shared_fraction * static_cast<double>(cur.features.size())));
-  auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
-  if (static_cast<int>(ids.size()) < lowered(io.min_common_features)) {
-    std::vector<FrameReport> out = wait(fmt::format("given up, only {} tracks shared with it", ids.size()));
+  // The tracks the anchor and this frame share (no map point: the map is out of view), and the counts the
+  // initialisation asks for.
+  const Correspondences c = Correspond(a, slot);
+  const InitCounts need = NeededCounts(slot);
+  if (static_cast<int>(c.ids.size()) < need.common) {
+    std::vector<FrameReport> out = wait(fmt::format("given up, only {} tracks shared with it", c.ids.size()));
     bridge_.reset();
     return out;
   }
-  const double med_motion = UpperMedian(motion_deg);
+  const double med_motion = UpperMedian(c.motion_deg);
   if (med_motion < io.min_median_motion_deg)
     return wait(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
   std::vector<int> window;
@@ -103,8 +90,8 @@ std::vector<FrameReport> System::TryBridge(int slot) {
   if (static_cast<int>(window.size()) < io.min_window_frames) return wait("too few frames since it");
   std::string why;
   bool rejected = false;
-  const std::optional<InitHypothesis> best = SolveInitWindow(window, n1, n2, ids, lowered(io.min_inliers),
-                                                             lowered(io.min_points), &why, &rejected);
+  const std::optional<InitHypothesis> best =
+      SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected);
   if (!best) return wait(why);
 
   // Into the map's frame: the anchor's pose is the reference, the scale puts the points as deep as the map's were.
@@ -136,11 +123,9 @@ std::vector<FrameReport> System::TryBridge(int slot) {
   // together as the parallax from the anchor grows, the anchor held and the first baseline keeping its length.
   reference_slot_ = a;
   posed_from_ = a;
-  init_slot_ = slot;
-  init_baseline_ = (cur.cam_from_world.OriginOfTargetInSource() - anchor.cam_from_world.OriginOfTargetInSource()).norm();
-  init_min_points_ = lowered(io.min_points);
-  settling_ = io.settle_parallax_deg > 0;
-  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
+  BeginSettling(slot,
+                (cur.cam_from_world.OriginOfTargetInSource() - anchor.cam_from_world.OriginOfTargetInSource()).norm(),
+                best->two_view_parallax_deg, need.points);
   last_posed_slot_ = slot;
   panorama_bearings_.clear();
   MarkSeen(slot);

@@ -59,6 +59,38 @@ int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoint
   return removed;
 }
 
+System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
+  Correspondences c;
+  const FrameRecord& ref = map_.frames[ref_slot];
+  for (const FeatureUndistorted& f : map_.frames[cur_slot].features) {
+    const FeatureUndistorted* g = ref.Find(f.id);
+    if (!g) continue;
+    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) continue;
+    c.n1.push_back(ideal_.PixelToNormalized(g->uv_px));
+    c.n2.push_back(ideal_.PixelToNormalized(f.uv_px));
+    c.ids.push_back(f.id);
+    const Eigen::Vector3d a = c.n1.back().homogeneous().normalized(), b = c.n2.back().homogeneous().normalized();
+    c.motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
+  }
+  return c;
+}
+
+System::InitCounts System::NeededCounts(int cur_slot) const {
+  const InitOptions& io = options_.init;
+  const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
+                                                 static_cast<double>(map_.frames[cur_slot].features.size())));
+  auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
+  return {lowered(io.min_common_features), lowered(io.min_inliers), lowered(io.min_points)};
+}
+
+void System::BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points) {
+  init_slot_ = init_slot;
+  init_baseline_ = baseline;
+  init_min_points_ = min_points;
+  settling_ = options_.init.settle_parallax_deg > 0;
+  next_settle_parallax_deg_ = options_.init.settle_step * std::max(two_view_parallax_deg, 1e-3);
+}
+
 double System::ParallaxFromReference(int slot) const {
   const FrameRecord& ref = map_.frames[reference_slot_];
   const FrameRecord& cur = map_.frames[slot];
@@ -455,44 +487,23 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   // Correspondences between the reference and this frame. Forward motion (a car) and fast turns lose features
   // quickly: when too few are shared, the reference moves on to the oldest frame since it that still shares
   // enough with this one, so that the motion gathered since is kept (moving it to this frame would start over).
-  std::vector<Eigen::Vector2d> n1, n2;
-  std::vector<int64_t> ids;
-  std::vector<double> motion_deg;  // angle between the two rays of a feature, the rotation not removed
-  auto correspond = [&](int ref_slot) {
-    n1.clear(), n2.clear(), ids.clear(), motion_deg.clear();
-    const FrameRecord& r = map_.frames[ref_slot];
-    for (const FeatureUndistorted& f : map_.frames[cur_slot].features) {
-      const FeatureUndistorted* g = r.Find(f.id);
-      if (!g) continue;
-      n1.push_back(ideal_.PixelToNormalized(g->uv_px));
-      n2.push_back(ideal_.PixelToNormalized(f.uv_px));
-      ids.push_back(f.id);
-      const Eigen::Vector3d a = n1.back().homogeneous().normalized(), b = n2.back().homogeneous().normalized();
-      motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
-    }
-  };
-  // The counts asked for, lowered where the frame tracks few features (InitOptions::min_shared_fraction).
-  const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
-                                                 static_cast<double>(map_.frames[cur_slot].features.size())));
-  auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
-  const int need_common = lowered(io.min_common_features), need_inliers = lowered(io.min_inliers),
-            need_points = lowered(io.min_points);
-  correspond(reference_slot_);
-  if (static_cast<int>(ids.size()) < need_common) {
+  const InitCounts need = NeededCounts(cur_slot);
+  Correspondences c = Correspond(reference_slot_, cur_slot);
+  if (static_cast<int>(c.ids.size()) < need.common) {
     int next = cur_slot;
     for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
       int shared = 0;
       for (const FeatureUndistorted& f : map_.frames[cur_slot].features) shared += map_.frames[s].Find(f.id) != nullptr;
-      if (shared >= need_common) next = s;
+      if (shared >= need.common) next = s;
     }
-    const size_t had = ids.size();
+    const size_t had = c.ids.size();
     reference_slot_ = next;
     if (next == cur_slot) return note(fmt::format("only {} features shared with the reference: new reference", had));
-    correspond(reference_slot_);
+    c = Correspond(reference_slot_, cur_slot);
   }
   const FrameRecord& ref = map_.frames[reference_slot_];
   const FrameRecord& cur = map_.frames[cur_slot];
-  const double med_motion = UpperMedian(motion_deg);
+  const double med_motion = UpperMedian(c.motion_deg);
   if (med_motion < io.min_median_motion_deg)
     return note(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
 
@@ -505,7 +516,8 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
                             window.size(), io.min_window_frames));
   std::string why;
   bool rejected = false;
-  std::optional<InitHypothesis> best = SolveInitWindow(window, n1, n2, ids, need_inliers, need_points, &why, &rejected);
+  std::optional<InitHypothesis> best =
+      SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected);
   if (!best) {
     note(why);
     out->front().init_rejected = rejected;
@@ -543,15 +555,11 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     map_.keyframes.push_back(window[w]);
   }
   last_posed_slot_ = cur_slot;
-  init_slot_ = cur_slot;
-  init_baseline_ = baseline;
-  settling_ = io.settle_parallax_deg > 0;
-  next_settle_parallax_deg_ = io.settle_step * std::max(best->two_view_parallax_deg, 1e-3);
+  BeginSettling(cur_slot, baseline, best->two_view_parallax_deg, need.points);
   MarkSeen(cur_slot);
   RefreshInlierFlags(cur_slot);
   tracker_->SetTranslationFloor(options_.sigma_trans_floor_rel_depth * UpperMedian(depths));
   initialised_ = true;
-  init_min_points_ = need_points;
   posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
 
   out->clear();

@@ -39,7 +39,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
     MapPoint* p = map_.Find(f.id);
     if (!p || p->state == PointState::kRemoved) continue;
     // In a provisional map the rest of the map is at another scale: it only joins by relocalisation.
-    if (bridging() && !Provisional(f.id)) continue;
+    if (!AtCurrentScale(f.id)) continue;
     obs.push_back({p->position_in_world, f.uv_px, p->inlier});
     pts.push_back(p);
   }
@@ -199,7 +199,7 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
   const Pose turned(q, -(q * panorama_centre_));
   int in_view = 0;
   for (const FeatureUndistorted& f : fr.features)
-    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved && (!bridging() || Provisional(f.id))) {
+    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved && AtCurrentScale(f.id)) {
       Eigen::Vector2d uv;
       in_view += ideal_.ProjectWorld(turned, p->position_in_world, &uv) && ideal_.InImage(uv);
     }
