@@ -421,6 +421,12 @@ void RegisterRun(CLI::App& app) {
       ->check(NonNegative())
       ->capture_default_str();
   cmd->add_flag("!--no-adjust", args->system.mapping.adjust, "Skip the Monte Carlo point adjustment");
+  cmd->add_option("--local-ba-keyframes", args->system.mapping.local_ba_keyframes,
+                  "After each keyframe's point adjustment, refine the poses of this many newest keyframes together "
+                  "with their points (bundle adjustment, the older window keyframes fixed; 0: off, the paper's "
+                  "back end)")
+      ->check(CLI::Range(0, 64))
+      ->capture_default_str();
   cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
                   "Smallest parallax for a new point (largest angle between its viewing rays)")
       ->check(NonNegative())

@@ -100,6 +100,11 @@ void PoseFlags::Add(CLI::App* cmd) {
                   "fixed spread)")
       ->check(NonNegative())
       ->capture_default_str();
+  cmd->add_option("--retry-rot-scale", tracker.retry_rot_scale,
+                  "A frame lost at the first try is scored again with a rotation spread this many times wider "
+                  "(0: no second try)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   cmd->add_option("--sigma-trans-floor", tracker.sigma_trans_floor_m, "Floor of the translation spread, metres")
       ->check(Positive())
       ->capture_default_str();

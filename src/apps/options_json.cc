@@ -22,7 +22,8 @@ NLOHMANN_JSON_SERIALIZE_ENUM(StructureMethod, {{StructureMethod::kMonteCarlo, "m
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseTrackerOptions, hypotheses, seed, random, sigma_rot_deg,
                                                 sigma_rot_motion_scale, sigma_trans_floor_m, sigma_trans_scale,
                                                 inlier_threshold_px, max_distance_px, min_points, min_inliers,
-                                                min_inlier_ratio, keyframe_min_inlier_ratio, pivot, rounds, round_shrink)
+                                                min_inlier_ratio, keyframe_min_inlier_ratio, pivot, rounds, round_shrink,
+                                                retry_rot_scale)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_deg, min_common_features, min_inliers,
                                                 min_points, min_shared_fraction, min_count_floor, min_window_frames,
                                                 min_median_parallax_deg, max_relative_depth_noise, ambiguity_chi2,
@@ -33,7 +34,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames
                                                 max_relative_depth_noise, max_noise_parallax_deg, starving_inliers,
                                                 starving_parallax_deg, max_reprojection_px, retriangulate_after_frames,
                                                 history_frames, adjust, adjust_threshold_px, candidate_threshold_px,
-                                                samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px)
+                                                samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px,
+                                                local_ba_keyframes, local_ba_loss_sigmas, local_ba_min_loss_px)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, predict_frames)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,
                                                 ba_fixed_keyframes, tracker, init, mapping, smoother,

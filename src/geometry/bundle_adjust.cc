@@ -58,9 +58,11 @@ double RmsPx(const std::vector<Pose>& cams, const std::vector<Eigen::Vector3d>& 
 
 BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vector3d>& pts,
                                  const std::vector<BundleObservation>& obs, const std::vector<bool>& fixed,
-                                 const BundleAdjustOptions& options) {
+                                 const BundleAdjustOptions& options, const std::vector<bool>& fixed_points) {
   options.Check();
   if (fixed.size() != cams.size()) throw std::invalid_argument("bundle adjustment: one fixed flag per camera is needed");
+  if (!fixed_points.empty() && fixed_points.size() != pts.size())
+    throw std::invalid_argument("bundle adjustment: one fixed flag per point is needed (or none)");
   BundleAdjustSummary out;
   out.initial_rms_px = RmsPx(cams, pts, obs, options.focal_px);
   std::vector<std::array<double, 4>> q(cams.size());
@@ -93,6 +95,8 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
       problem.SetParameterBlockConstant(t[i].data());
     }
   }
+  for (size_t j = 0; j < fixed_points.size(); ++j)
+    if (fixed_points[j] && problem.HasParameterBlock(pts[j].data())) problem.SetParameterBlockConstant(pts[j].data());
   ceres::Solver::Options so;
   so.linear_solver_type = options.dense_schur ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   so.max_num_iterations = options.max_iterations;

@@ -47,9 +47,10 @@ struct BundleAdjustSummary {
 double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
                            const Eigen::Vector2d& uv_norm, double focal_px);
 
-// Adjusts cam_from_world (except those with fixed[i] = true) and points_in_world in place.
+// Adjusts cam_from_world (except those with fixed[i] = true) and points_in_world (except those with
+// fixed_points[j] = true; an empty fixed_points: none) in place.
 BundleAdjustSummary BundleAdjust(std::vector<Pose>& cam_from_world, std::vector<Eigen::Vector3d>& points_in_world,
                                  const std::vector<BundleObservation>& observations, const std::vector<bool>& fixed,
-                                 const BundleAdjustOptions& options);
+                                 const BundleAdjustOptions& options, const std::vector<bool>& fixed_points = {});
 
 }  // namespace mcslam::geometry

@@ -36,6 +36,8 @@ void PoseTrackerOptions::Check() const {
   if (rounds < 1 || rounds > 16) fail(fmt::format("rounds must be in [1, 16], got {}", rounds));
   if (rounds > hypotheses) fail(fmt::format("rounds ({}) must not exceed hypotheses ({})", rounds, hypotheses));
   if (!(round_shrink > 0 && round_shrink <= 1)) fail(fmt::format("round_shrink must be in (0, 1], got {}", round_shrink));
+  if (!(retry_rot_scale == 0 || (retry_rot_scale > 1 && retry_rot_scale <= 100)))
+    fail(fmt::format("retry_rot_scale must be 0 (no retry) or in (1, 100], got {}", retry_rot_scale));
 }
 
 std::string PoseTrackerOptions::LostReason(int inliers, int scoring_inliers, int scored) const {
@@ -117,6 +119,45 @@ Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::
   return dt;
 }
 
+bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma_rot_deg,
+                        const std::vector<PointObservation>& obs, PoseEstimate* est, std::vector<double>* residuals,
+                        std::vector<uint8_t>* inliers) {
+  // omega is added to all 4 quaternion components; a change dv of the vector part rotates by ~2|dv|.
+  const float sigma_q = static_cast<float>(DegToRad(sigma_rot_deg) / 2.0);
+  compute::PoseSampling s;
+  const Eigen::Quaterniond q0 = prev.q.normalized();
+  s.q[0] = static_cast<float>(q0.w()), s.q[1] = static_cast<float>(q0.x());
+  s.q[2] = static_cast<float>(q0.y()), s.q[3] = static_cast<float>(q0.z());
+  const Eigen::Vector3d t_pivot = prev.t + q0 * m;
+  for (int k = 0; k < 3; ++k) s.t[k] = static_cast<float>(t_pivot[k]);
+  compute::PoseScoringParams params;
+  params.fx = static_cast<float>(camera_.fx);
+  params.fy = static_cast<float>(camera_.fy);
+  params.max_distance_px = static_cast<float>(options_.max_distance_px);
+  const compute::PoseScoringPoints pts{sx_.data(), sy_.data(), sz_.data(), su_.data(), sv_.data(), est->scored};
+
+  const double sigma_q4[4] = {sigma_q, sigma_q, sigma_q, sigma_q};
+  const double sigma_t3[3] = {est->sigma_t[0], est->sigma_t[1], est->sigma_t[2]};
+  const compute::BestHypothesis best = compute::ScoreInRounds(*kernel_, s, sigma_q4, sigma_t3, pts, params, table_,
+                                                              options_.hypotheses, options_.rounds,
+                                                              options_.round_shrink);
+  if (best.index < 0) {
+    est->lost_reason = "no finite hypothesis score";
+    residuals->assign(obs.size(), std::numeric_limits<double>::infinity());
+    inliers->assign(obs.size(), 0);
+    return false;
+  }
+  const Eigen::Quaterniond q_best(best.q[0], best.q[1], best.q[2], best.q[3]);
+  est->cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
+  est->score = best.score;
+  est->inliers = ClassifyInliers(est->cam_from_world, obs, residuals, inliers);
+  double sum = 0;
+  for (size_t i = 0; i < obs.size(); ++i)
+    if ((*inliers)[i]) sum += (*residuals)[i];
+  est->mean_inlier_residual_px = est->inliers > 0 ? sum / est->inliers : 0.0;
+  return true;
+}
+
 PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,
                                 std::vector<double>* residuals, std::vector<uint8_t>* inliers) {
   PoseEstimate est;
@@ -152,46 +193,23 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
 
   const Eigen::Vector3d dt = LinearisedTranslation(prev, obs);
   est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
-  // omega is added to all 4 quaternion components; a change dv of the vector part rotates by ~2|dv|.
   const double sigma_rot_deg = std::max(options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg);
-  const float sigma_q = static_cast<float>(DegToRad(sigma_rot_deg) / 2.0);
-
   if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
-
-  compute::PoseSampling s;
-  const Eigen::Quaterniond q0 = prev.q.normalized();
-  s.q[0] = static_cast<float>(q0.w()), s.q[1] = static_cast<float>(q0.x());
-  s.q[2] = static_cast<float>(q0.y()), s.q[3] = static_cast<float>(q0.z());
-  const Eigen::Vector3d t_pivot = prev.t + q0 * m;
-  for (int k = 0; k < 3; ++k) s.t[k] = static_cast<float>(t_pivot[k]);
-  compute::PoseScoringParams params;
-  params.fx = static_cast<float>(camera_.fx);
-  params.fy = static_cast<float>(camera_.fy);
-  params.max_distance_px = static_cast<float>(options_.max_distance_px);
-  const compute::PoseScoringPoints pts{sx_.data(), sy_.data(), sz_.data(), su_.data(), sv_.data(), est.scored};
-
-  const double sigma_q4[4] = {sigma_q, sigma_q, sigma_q, sigma_q};
-  const double sigma_t3[3] = {est.sigma_t[0], est.sigma_t[1], est.sigma_t[2]};
-  const compute::BestHypothesis best = compute::ScoreInRounds(*kernel_, s, sigma_q4, sigma_t3, pts, params, table_,
-                                                              options_.hypotheses, options_.rounds,
-                                                              options_.round_shrink);
-
-  if (best.index < 0) {
-    est.lost_reason = "no finite hypothesis score";
-    residuals->assign(obs.size(), std::numeric_limits<double>::infinity());
-    inliers->assign(obs.size(), 0);
-    return est;
+  if (!Score(prev, m, sigma_rot_deg, obs, &est, residuals, inliers)) return est;
+  est.lost_reason = options_.LostReason(est.inliers, ScoringInliers(obs, *inliers), est.scored);
+  if (!est.lost_reason.empty() && options_.retry_rot_scale > 0) {
+    PoseEstimate wide = est;
+    std::vector<double> wide_residuals;
+    std::vector<uint8_t> wide_inliers;
+    if (Score(prev, m, options_.retry_rot_scale * sigma_rot_deg, obs, &wide, &wide_residuals, &wide_inliers) &&
+        (wide.lost_reason = options_.LostReason(wide.inliers, ScoringInliers(obs, wide_inliers), wide.scored)).empty()) {
+      est = wide;
+      *residuals = std::move(wide_residuals);
+      *inliers = std::move(wide_inliers);
+      est.widened = true;
+    }
   }
-  const Eigen::Quaterniond q_best(best.q[0], best.q[1], best.q[2], best.q[3]);
-  est.cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
-  est.score = best.score;
-  est.inliers = ClassifyInliers(est.cam_from_world, obs, residuals, inliers);
-  double sum = 0;
-  for (size_t i = 0; i < obs.size(); ++i)
-    if ((*inliers)[i]) sum += (*residuals)[i];
-  est.mean_inlier_residual_px = est.inliers > 0 ? sum / est.inliers : 0.0;
-  if (est.lost_reason = options_.LostReason(est.inliers, ScoringInliers(obs, *inliers), est.scored);
-      !est.lost_reason.empty()) {
+  if (!est.lost_reason.empty()) {
     est.cam_from_world = prev;
     return est;
   }

@@ -54,6 +54,12 @@ struct PoseTrackerOptions {
   Pivot pivot = Pivot::kCentroid;
   int rounds = 3;                      // resample around the best with shrinking spread; 1 = the paper's one-shot sampling
   double round_shrink = 0.35;          // spread factor from one round to the next
+  // A frame whose best hypothesis is no pose (LostReason) is scored once more with a rotation spread this many
+  // times wider (0: no second try). The spread follows the rotation measured in the last frame, so the first
+  // frame of a turn (a car entering a bend, a hand-held pan starting) is sampled as if the camera were still
+  // going straight: rendered forward seed 10 was lost for good at its bend's first frame, fast seed 5 at frame
+  // 9. The second try costs one more scoring, on lost frames only.
+  double retry_rot_scale = 4.0;
   void Check() const;                  // throws std::invalid_argument naming the bad field
   // Why an estimate is no pose; empty when it is one. `inliers`: observations within the threshold (against
   // min_inliers); `scoring_inliers` of the `scored` points (against min_inlier_ratio).
@@ -77,6 +83,7 @@ struct PoseEstimate {
   double mean_inlier_residual_px = 0;
   Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();  // the translation spread used (m)
   std::string lost_reason;       // why, when not tracked
+  bool widened = false;          // tracked at the second try, with the wider rotation spread (retry_rot_scale)
 };
 
 // How many of the observations that took part in the score (was_inlier) are flagged in `inliers`.
@@ -109,6 +116,12 @@ class PoseTracker {
   compute::PoseKernel& kernel() { return *kernel_; }
 
  private:
+  // One Monte Carlo scoring about prev (pivot m, rotation spread sigma_rot_deg, est->sigma_t): the best
+  // hypothesis, its inliers, residuals and score into est. False (and est->lost_reason) when no hypothesis
+  // has a finite score.
+  bool Score(const Pose& prev, const Eigen::Vector3d& m, double sigma_rot_deg, const std::vector<PointObservation>& obs,
+             PoseEstimate* est, std::vector<double>* residuals, std::vector<uint8_t>* inliers);
+
   PinholeCamera camera_;
   PinholeCamera ideal_;  // same intrinsics, no distortion: the observations arrive undistorted
   PoseTrackerOptions options_;

@@ -77,6 +77,12 @@ void InitOptions::Check() const {
 
 void MappingOptions::Check() const {
   if (history_frames < 1) Fail(fmt::format("mapping: history_frames must be >= 1, got {}", history_frames));
+  if (local_ba_keyframes < 0 || local_ba_keyframes == 1 || local_ba_keyframes > 64)
+    Fail(fmt::format("mapping: local_ba_keyframes must be 0 (off) or in [2, 64], got {}", local_ba_keyframes));
+  if (!(local_ba_loss_sigmas > 0 && local_ba_loss_sigmas <= 100))
+    Fail(fmt::format("mapping: local_ba_loss_sigmas must be in (0, 100], got {}", local_ba_loss_sigmas));
+  if (!(local_ba_min_loss_px > 0 && local_ba_min_loss_px <= 100))
+    Fail(fmt::format("mapping: local_ba_min_loss_px must be in (0, 100], got {}", local_ba_min_loss_px));
   if (retriangulate_after_frames < 1)
     Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
   if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));
@@ -137,6 +143,7 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
 void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes) {
   if (!map_.frames.empty() || initialised_) throw std::logic_error("System::StartInMap: only before the first frame");
   for (MapPoint& p : points) {
+    loaded_points_.insert(p.id);
     p.state = PointState::kLost;
     p.inlier = true;
     p.last_seen_frame = -1;

@@ -121,6 +121,21 @@ struct MappingOptions {
   double sigma_scale = 1.0;                  // Sigma_j = diag(scale * |dz| + floor), dz from Eqs. 8-9
   double sigma_floor_rel_depth = 0.01;       // floor, as a fraction of the point's depth
   double max_distance_px = 20.0;             // cap of one observation's contribution to a sample's score
+  // Local bundle adjustment (System::LocalBundleAdjust), after each keyframe's Monte Carlo point adjustment:
+  // the poses of the newest local_ba_keyframes keyframes and every point they see, refined together, the
+  // older keyframes of the Fibonacci window held fixed (they hold the gauge and the scale). The paper's
+  // estimators never move a pose and a point together: each new point is triangulated from poses that were
+  // themselves found from older points, so where the map renews itself quickly (a car, a fast pan, a turn)
+  // the scale and the heading drift with each generation of points. Measured on the rendered scenarios, 2
+  // cores: forward seeds 1-10 from 0.3-5.3 m to 3-27 cm over a 119 m path, fast 15-36 cm -> 1.5-6 cm,
+  // 7-Scenes 7.8 -> 5.7-6.3 cm (docs/tuning.md). 0: off (the paper's back end).
+  int local_ba_keyframes = 8;
+  // Its robust loss: Cauchy with this scale in units of the tracks' noise sigma (measured: the map's recent
+  // median residual), never under local_ba_min_loss_px. 2.385 sigma is the Cauchy scale of 95 % efficiency
+  // under Gaussian noise (Holland and Welsch): sub-pixel drift of a few tracks, which a least-squares pose
+  // would follow, weighs little.
+  double local_ba_loss_sigmas = 2.385;
+  double local_ba_min_loss_px = 0.3;
   void Check() const;
 };
 
@@ -342,6 +357,10 @@ class System {
   int TriangulateNewPoints(int slot, int inliers);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
+  // MappingOptions::local_ba_keyframes: the newest keyframes' poses and their points by one bundle
+  // adjustment, the Fibonacci window's older keyframes fixed. Not while settling (the settling adjusts the
+  // whole window) nor on a provisional map (its scale is not the older keyframes').
+  void LocalBundleAdjust(int slot, FrameReport* r);
   PoseEstimate EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
                                std::vector<uint8_t>* inl) const;
   std::vector<int> WindowSlots() const;
@@ -388,6 +407,8 @@ class System {
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
   // The bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is found again.
   std::optional<BridgeState> bridge_;
+  // The points of a map this run started in (StartInMap): the local bundle adjustment holds them fixed.
+  std::unordered_set<int64_t> loaded_points_;
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);

@@ -178,6 +178,58 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   r->adjusted += static_cast<int>(wp.pts.size()) - removed;
 }
 
+void System::LocalBundleAdjust(int slot, FrameReport* r) {
+  const MappingOptions& mo = options_.mapping;
+  if (mo.local_ba_keyframes == 0 || settling_ || bridging()) return;
+  // Posed keyframes whose features are kept, newest first: the first local_ba_keyframes are adjusted.
+  std::vector<int> recent;
+  for (auto it = map_.keyframes.rbegin(); it != map_.keyframes.rend() && *it >= pruned_until_ &&
+                                          static_cast<int>(recent.size()) < 3 * mo.local_ba_keyframes;
+       ++it)
+    if (map_.frames[*it].has_pose) recent.push_back(*it);
+  const int n_adjusted = std::min<int>(mo.local_ba_keyframes, static_cast<int>(recent.size()));
+  if (n_adjusted < 3) return;
+  // Held fixed: the next twice as many keyframes (they see most of the same points: the gauge and the scale
+  // pass through them; with only the Fibonacci keyframes fixed, KITTI 06's scale slid 5 % in its last 17
+  // frames with 4 adjusted), then the Fibonacci window's older keyframes (the long-lived points).
+  std::vector<int> window(recent.begin(), recent.end());  // newest first
+  for (int ws : WindowSlots())
+    if (ws < window.back() && ws >= pruned_until_) window.push_back(ws);
+  std::reverse(window.begin(), window.end());
+  const size_t first_adjusted = window.size() - static_cast<size_t>(n_adjusted);
+  std::vector<bool> fixed(window.size(), true);
+  std::fill(fixed.begin() + static_cast<long>(first_adjusted), fixed.end(), false);
+  // Without older keyframes (the start of the map) the oldest two adjusted ones hold the gauge.
+  if (first_adjusted == 0) fixed[0] = fixed[1] = true;
+  // The points seen by an adjusted keyframe (and at least twice in all), with all their views in the window.
+  const WindowPoints all = CollectWindowPoints(window);
+  std::vector<int> keep(all.pts.size(), -1);
+  for (const geometry::BundleObservation& o : all.obs)
+    if (!fixed[static_cast<size_t>(o.camera)]) keep[static_cast<size_t>(o.point)] = 0;
+  WindowPoints wp;
+  for (size_t i = 0; i < all.pts.size(); ++i)
+    if (keep[i] == 0) keep[i] = static_cast<int>(wp.pts.size()), wp.pts.push_back(all.pts[i]), wp.X.push_back(all.X[i]);
+  for (const geometry::BundleObservation& o : all.obs)
+    if (keep[static_cast<size_t>(o.point)] >= 0) wp.obs.push_back({o.camera, keep[static_cast<size_t>(o.point)], o.uv_norm});
+  if (wp.pts.empty()) return;
+  std::vector<Pose> cams;
+  for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
+  geometry::BundleAdjustOptions bo;
+  bo.focal_px = focal_px_;
+  bo.cauchy = true;
+  bo.huber_px = std::max(mo.local_ba_min_loss_px, mo.local_ba_loss_sigmas * RecentNoisePx().value_or(1.0));
+  bo.max_iterations = options_.ba_iterations;
+  // A loaded map is the frame this run localises in: its points are held where it put them.
+  std::vector<bool> fixed_points;
+  if (!loaded_points_.empty()) {
+    fixed_points.resize(wp.pts.size());
+    for (size_t i = 0; i < wp.pts.size(); ++i) fixed_points[i] = loaded_points_.count(wp.pts[i]->id) > 0;
+  }
+  geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo, fixed_points);
+  for (size_t w = first_adjusted; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
+  r->removed += StoreAdjustedPoints(cams, wp, map_.frames[slot].index);
+}
+
 void System::AdjustPoints(int slot, FrameReport* r) {
   const MappingOptions& mo = options_.mapping;
   const FrameRecord& cur = map_.frames[slot];

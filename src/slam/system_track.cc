@@ -58,6 +58,8 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   r.track_ms = Ms(t0);
   r.scored = est.scored;
   r.inliers = est.inliers;
+  if (est.widened)
+    r.note = fmt::format("tracked with a {:g}x wider rotation spread", options_.tracker.retry_rot_scale);
   if (!est.tracked) {
     for (MapPoint* p : pts) p->inlier = true;  // everyone gets another chance in the next frame
     const bool turning = !panorama_bearings_.empty();
@@ -109,6 +111,8 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
         r.cam_from_world = fr.cam_from_world;  // the adjustment moved this keyframe too
       } else {
         AdjustPoints(slot, &r);
+        LocalBundleAdjust(slot, &r);
+        r.cam_from_world = fr.cam_from_world;  // the local adjustment moves this keyframe too
       }
       r.adjust_ms = Ms(t2);
     }
