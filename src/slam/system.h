@@ -122,13 +122,13 @@ struct MappingOptions {
   double sigma_floor_rel_depth = 0.01;       // floor, as a fraction of the point's depth
   double max_distance_px = 20.0;             // cap of one observation's contribution to a sample's score
   // Local bundle adjustment (System::LocalBundleAdjust), after each keyframe's Monte Carlo point adjustment:
-  // the poses of the newest local_ba_keyframes keyframes and every point they see, refined together, the
-  // older keyframes of the Fibonacci window held fixed (they hold the gauge and the scale). The paper's
-  // estimators never move a pose and a point together: each new point is triangulated from poses that were
-  // themselves found from older points, so where the map renews itself quickly (a car, a fast pan, a turn)
-  // the scale and the heading drift with each generation of points. Measured on the rendered scenarios, 2
-  // cores: forward seeds 1-10 from 0.3-5.3 m to 3-27 cm over a 119 m path, fast 15-36 cm -> 1.5-6 cm,
-  // 7-Scenes 7.8 -> 5.7-6.3 cm (docs/tuning.md). 0: off (the paper's back end).
+  // the poses of the newest local_ba_keyframes keyframes and every point they see, refined together; the
+  // twice as many keyframes before them and the Fibonacci window's older ones held fixed (they hold the gauge
+  // and the scale). The paper's estimators never move a pose and a point together: each new point is
+  // triangulated from poses that were themselves found from older points, so where the map renews itself
+  // quickly (a car, a fast pan, a turn) the scale and the heading drift with each generation of points.
+  // Robustness matrix, 2 cores, seeds 1-10: rendered forward from 0.32-5.3 m to 3-24 cm over a 119 m path,
+  // fast 2-6 cm, 7-Scenes 7.0-8.3 -> 6.9-7.2 cm (docs/tuning.md). 0: off (the paper's back end).
   int local_ba_keyframes = 8;
   // Its robust loss: Cauchy with this scale in units of the tracks' noise sigma (measured: the map's recent
   // median residual), never under local_ba_min_loss_px. 2.385 sigma is the Cauchy scale of 95 % efficiency
@@ -358,8 +358,9 @@ class System {
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
   // MappingOptions::local_ba_keyframes: the newest keyframes' poses and their points by one bundle
-  // adjustment, the Fibonacci window's older keyframes fixed. Not while settling (the settling adjusts the
-  // whole window) nor on a provisional map (its scale is not the older keyframes').
+  // adjustment, the keyframes before them fixed (MappingOptions says which), a loaded map's points fixed. Not
+  // while settling (the settling adjusts the whole window), on a provisional map (its scale is not the older
+  // keyframes'), nor over fewer points than the adjusted poses have parameters.
   void LocalBundleAdjust(int slot, FrameReport* r);
   PoseEstimate EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
                                std::vector<uint8_t>* inl) const;

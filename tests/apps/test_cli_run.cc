@@ -359,8 +359,8 @@ TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
 // A car at 1 m a frame (the forward scenario, rendered: a 90-degree bend, 119 m): the map renews itself every few
 // frames, and with the paper's back end alone (poses and points never refined together) each generation of
 // points passes its scale and heading errors on to the next. The local bundle adjustment after each keyframe
-// holds them. Seed 9, measured: 120 / 120 tracked, ATE 4-8 cm with it; 117 / 120 and 5.3 m without (the
-// scale grew 1.9x after the bend). Over seeds 1-10 with it, 3-27 cm (docs/tuning.md). Bounds: every frame
+// holds them. Seed 9, measured: 120 / 120 tracked, ATE 16.5 cm with it; 117 / 120 and 5.2 m without (the
+// scale grew 1.9x after the bend). Over seeds 1-10 with it, 3-24 cm (docs/robustness.md). Bounds: every frame
 // tracked; ATE under 0.5 m (0.4 % of the path; ~2x the worst seed); the run without it at least 5x worse.
 TEST(CliRun, TheLocalBundleAdjustmentKeepsACarsScaleThroughItsBend) {
   TempDir dir;

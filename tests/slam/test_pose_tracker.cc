@@ -173,7 +173,7 @@ TEST(PoseTracker, AFrameLostAtTheFirstSpreadIsScoredAgainWider) {
   // bounds: the yaw/sideways valley of one frame, 0.6 degrees).
   EXPECT_LT(AngularDistanceDeg(e.cam_from_world.q, truth.q), 0.6);
   // Sampled 4x coarser, the pose sits a little further along that valley: nearly all within the 3 px threshold
-  // (145 of 150 measured), far above the half that tracking asks.
+  // (150 of 150 measured), far above the half that tracking asks.
   EXPECT_GE(e.inliers, static_cast<int>(obs.size()) * 9 / 10);
   // A frame the first try tracks takes no second.
   const PoseEstimate near = MakeTracker()->Track(truth, obs, 2, &res, &inl);
