@@ -179,12 +179,13 @@ struct SystemOptions {
   // A bridge over the unmapped: when a turn that took the map out of view ends in a move (the rotation-only
   // tracking above refuses the frame), the camera goes on where nothing is mapped and would stay lost until the
   // map comes back into view. A provisional map is made instead from two views, as the initialisation makes the
-  // first one, anchored at the turn's last frame (its pose is known, so only the scale is free): its scale is
-  // guessed so that its points lie as deep as the map's did before the turn. Tracking and mapping go on in it;
-  // when the caller relocalises a frame against the rest of the map (it tries each frame while bridging()), the
-  // provisional map and the frames posed in it are scaled about the anchor's centre so that the frame's two
-  // poses agree, and it becomes part of the map. A provisional map whose tracking fails first leaves the map
-  // (its frames keep their poses). docs/rotation_only.md.
+  // first one, anchored at the turn's last pure-rotation frame (its pose is known, so only the scale is free):
+  // its scale is guessed so that its points lie as deep as the map's did before the turn. Tracking and mapping go
+  // on in it; when the caller relocalises a frame against the rest of the map (it tries each frame while
+  // bridging()), the provisional map and the frames posed in it are scaled about the anchor's centre so that the
+  // frame's two poses agree, then adjusted between the anchor and that frame (the map's points held), and it
+  // becomes part of the map. A provisional map whose tracking fails first leaves the map (its frames keep their
+  // poses). docs/rotation_only.md.
   bool bridge = true;
   void Check() const;
 };
@@ -405,12 +406,13 @@ class System {
   static constexpr int kPanoramaCentreLookback = 10;  // frames searched back for a well-posed centre
   Eigen::Vector3d panorama_centre_ = Eigen::Vector3d::Zero();
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
+  std::vector<std::pair<int, double>> panorama_rms_px_;  // each of its frames (slot) and its residual, in order
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
   // The bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is found again.
   std::optional<BridgeState> bridge_;
   // The points of a map this run started in (StartInMap): the local bundle adjustment holds them fixed.
   std::unordered_set<int64_t> loaded_points_;
-  // After a turn ended in a move at `slot`: a bridge anchored at the turn's last frame; false (and no bridge)
+  // After a turn ended in a move at `slot`: a bridge anchored at the turn's last pure-rotation frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);
   // Waiting for the provisional map: its two-view solution between the anchor and `slot`. The reports of the
@@ -419,6 +421,9 @@ class System {
   // A frame relocalised against the map while bridging: tracked in the provisional map, which is then scaled to
   // agree and joins the map.
   std::vector<FrameReport> JoinBridge(int slot, const Pose& cam_from_world);
+  // After the scaling of a join: the bridge's keyframes (and the joining frame) and its points adjusted together,
+  // the anchor and the map's points fixed. Returns how many keyframes were adjusted (0: too few points).
+  int AdjustJoinedBridge(int slot, FrameReport* r);
   void AbandonBridge(int64_t frame_index);
 };
 

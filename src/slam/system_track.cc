@@ -78,7 +78,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
     }
     // A turn that ended in a move, the map out of view: a bridge over what is not mapped.
     if (options_.bridge && turning && !pose_hint && !settling_ && last_posed_slot_ == slot - 1 && StartBridge(slot))
-      r.note += fmt::format("; a provisional map will be made from frame {}", map_.frames[slot - 1].index);
+      r.note += fmt::format("; a provisional map will be made from frame {}", map_.frames[bridge_->anchor_slot].index);
     MarkSeen(slot);
     r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
     return r;
@@ -158,6 +158,7 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
     const Eigen::Quaterniond world_from_cam = prev.cam_from_world.q.conjugate();
     for (const FeatureUndistorted& f : prev.features) panorama_bearings_[f.id] = world_from_cam * bearing(f);
     panorama_min_rms_px_ = std::numeric_limits<double>::infinity();
+    panorama_rms_px_.clear();
   }
   FrameRecord& fr = map_.frames[slot];
   std::vector<Eigen::Vector3d> in_world, in_cam;
@@ -213,6 +214,7 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
     return false;
   }
   panorama_min_rms_px_ = std::min(panorama_min_rms_px_, rot.rms_px);
+  panorama_rms_px_.emplace_back(slot, rot.rms_px);
   fr.has_pose = true;
   fr.cam_from_world = turned;
   last_posed_slot_ = slot;
