@@ -330,8 +330,8 @@ void ImageRun::RunFrames() {
       row.backend_ms = step.backend_ms;
       if (step.reloc_inliers > 0) {
         progress.Clear();
-        spdlog::info("frame {}: relocalised from {} of {} features matched to the map", frame.index, row.reloc_inliers,
-                     row.reloc_matches);
+        spdlog::info("frame {}: relocalised from {} of {} features matched to the map{}", frame.index, row.reloc_inliers,
+                     row.reloc_matches, step.reloc_near_provisional ? " (near the provisional map's orientation)" : "");
       }
       ++frames_processed;
       const slam::FrameReport* current = nullptr;

@@ -279,6 +279,7 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
   if (!reloc && first_looks.size() >= 2) reloc = match(true);
   if (!reloc) return;
   step->reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
+  step->reloc_near_provisional = reloc->near_provisional_orientation;
   const std::unordered_set<int64_t> inliers(reloc->inlier_point_ids.begin(), reloc->inlier_point_ids.end());
   for (const auto& [track_id, point_id] : relabel) {
     if (!inliers.count(point_id) || !frontend_.Relabel(track_id, point_id, lost_descriptors_.at(point_id))) continue;

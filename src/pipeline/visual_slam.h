@@ -63,6 +63,7 @@ struct VisualSlamStep {
   bool reloc_tried = false;
   int reloc_matches = 0;
   int reloc_inliers = 0;
+  bool reloc_near_provisional = false;  // Relocalisation::near_provisional_orientation
   double reloc_ms = 0;
   // The report of this frame among `reports` (nullptr when the System gave none for it).
   const slam::FrameReport* current() const;

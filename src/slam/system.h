@@ -199,6 +199,9 @@ struct Relocalisation {
   Pose cam_from_world;
   std::vector<int64_t> inlier_point_ids;  // the matches that agree with it
   int matches = 0;
+  // Found among the poses near a provisional map's orientation, the free search having found none or one
+  // that disagreed with it (System::Relocalise).
+  bool near_provisional_orientation = false;
 };
 
 enum class FrameStatus { kWaitingForInit, kTracked, kLost };

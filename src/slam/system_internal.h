@@ -17,6 +17,11 @@ inline double ParallaxForDepthNoiseDeg(double noise_px, double focal_px, double 
   return RadToDeg(noise_px / (focal_px * relative_depth_noise));
 }
 
+// The largest difference (degrees) between a frame's orientation in a provisional map and its relocalised one
+// for the provisional map to join the map (System::JoinBridge): the provisional map's orientation is anchored to
+// the map's at the turn and drifts little while it lasts; its scale is what the join finds.
+constexpr double kJoinMaxRotationDeg = 5.0;
+
 inline double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
