@@ -9,12 +9,32 @@
 
 namespace mcslam::geometry {
 
+namespace {
+
+// cam_from_world from OpenCV's rotation vector and translation; nothing when not finite.
+std::optional<Pose> FromCv(const cv::Mat& rvec, const cv::Mat& tvec) {
+  cv::Mat R;
+  cv::Rodrigues(rvec, R);
+  Eigen::Matrix3d Re;
+  Eigen::Vector3d te;
+  cv::cv2eigen(R, Re);
+  cv::cv2eigen(tvec, te);
+  if (!Re.allFinite() || !te.allFinite()) return std::nullopt;
+  return Pose::FromRotationTranslation(Re, te);
+}
+
+void CheckSizes(const char* who, size_t points, size_t observations) {
+  if (points != observations)
+    throw std::invalid_argument(std::string(who) + ": " + std::to_string(points) + " points but " +
+                                std::to_string(observations) + " observations");
+}
+
+}  // namespace
+
 std::optional<Pose> SolvePnp(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector2d>& uv,
                              const PnpOptions& o, int* num_inliers) {
   if (num_inliers) *num_inliers = 0;
-  if (points.size() != uv.size())
-    throw std::invalid_argument("SolvePnp: " + std::to_string(points.size()) + " points but " +
-                                std::to_string(uv.size()) + " observations");
+  CheckSizes("SolvePnp", points.size(), uv.size());
   const size_t n = points.size();
   if (n < 4 || static_cast<int>(n) < o.min_inliers) return std::nullopt;
   std::vector<cv::Point3d> obj(n);
@@ -33,39 +53,17 @@ std::optional<Pose> SolvePnp(const std::vector<Eigen::Vector3d>& points, const s
   std::vector<cv::Point2d> img_in;
   for (int i = 0; i < inliers.rows; ++i) obj_in.push_back(obj[inliers.at<int>(i)]), img_in.push_back(img[inliers.at<int>(i)]);
   cv::solvePnPRefineLM(obj_in, img_in, K, cv::noArray(), rvec, tvec);
-  cv::Mat R;
-  cv::Rodrigues(rvec, R);
-  Eigen::Matrix3d Re;
-  Eigen::Vector3d te;
-  cv::cv2eigen(R, Re);
-  cv::cv2eigen(tvec, te);
-  if (!Re.allFinite() || !te.allFinite()) return std::nullopt;
-  if (num_inliers) *num_inliers = inliers.rows;
-  return Pose::FromRotationTranslation(Re, te);
+  const std::optional<Pose> pose = FromCv(rvec, tvec);
+  if (pose && num_inliers) *num_inliers = inliers.rows;
+  return pose;
 }
-
-namespace {
-
-Pose FromCv(const cv::Mat& rvec, const cv::Mat& tvec) {
-  cv::Mat R;
-  cv::Rodrigues(rvec, R);
-  Eigen::Matrix3d Re;
-  Eigen::Vector3d te;
-  cv::cv2eigen(R, Re);
-  cv::cv2eigen(tvec, te);
-  return Pose::FromRotationTranslation(Re, te);
-}
-
-}  // namespace
 
 std::optional<Pose> SolvePnpNearRotation(const std::vector<Eigen::Vector3d>& points,
                                          const std::vector<Eigen::Vector2d>& uv, const PnpOptions& o,
                                          const Eigen::Quaterniond& prior, double max_deg, uint64_t seed,
                                          int* num_inliers) {
   if (num_inliers) *num_inliers = 0;
-  if (points.size() != uv.size())
-    throw std::invalid_argument("SolvePnpNearRotation: " + std::to_string(points.size()) + " points but " +
-                                std::to_string(uv.size()) + " observations");
+  CheckSizes("SolvePnpNearRotation", points.size(), uv.size());
   const size_t n = points.size();
   if (n < 4 || static_cast<int>(n) < o.min_inliers) return std::nullopt;
   const double threshold = o.threshold_px / o.focal_px;
@@ -90,9 +88,9 @@ std::optional<Pose> SolvePnpNearRotation(const std::vector<Eigen::Vector3d>& poi
     std::vector<cv::Mat> rvecs, tvecs;
     if (cv::solveP3P(obj, img, K, cv::noArray(), rvecs, tvecs, cv::SOLVEPNP_P3P) <= 0) continue;
     for (size_t k = 0; k < rvecs.size(); ++k) {
-      const Pose pose = FromCv(rvecs[k], tvecs[k]);
-      if (!pose.t.allFinite() || AngularDistanceDeg(pose.q, prior) > max_deg) continue;
-      if (inliers_of(pose, &which) > static_cast<int>(best.size())) best = which;
+      const std::optional<Pose> pose = FromCv(rvecs[k], tvecs[k]);
+      if (!pose || AngularDistanceDeg(pose->q, prior) > max_deg) continue;
+      if (inliers_of(*pose, &which) > static_cast<int>(best.size())) best = which;
     }
   }
   if (static_cast<int>(best.size()) < std::max(4, o.min_inliers)) return std::nullopt;
@@ -102,10 +100,9 @@ std::optional<Pose> SolvePnpNearRotation(const std::vector<Eigen::Vector3d>& poi
   cv::Mat rvec, tvec;
   if (!cv::solvePnP(obj_in, img_in, K, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_EPNP)) return std::nullopt;
   cv::solvePnPRefineLM(obj_in, img_in, K, cv::noArray(), rvec, tvec);
-  const Pose pose = FromCv(rvec, tvec);
-  if (!pose.q.coeffs().allFinite() || !pose.t.allFinite() || AngularDistanceDeg(pose.q, prior) > max_deg)
-    return std::nullopt;
-  const int count = inliers_of(pose, &which);
+  const std::optional<Pose> pose = FromCv(rvec, tvec);
+  if (!pose || AngularDistanceDeg(pose->q, prior) > max_deg) return std::nullopt;
+  const int count = inliers_of(*pose, &which);
   if (count < std::max(4, o.min_inliers)) return std::nullopt;
   if (num_inliers) *num_inliers = count;
   return pose;
