@@ -48,12 +48,6 @@ std::optional<double> ProcStatusMiB(const char* field) {
   return static_cast<double>(*kb) / 1024.0;
 }
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
-}
-
 struct Window {
   int first = 0, last = 0;
   double median_ms = 0, p95_ms = 0;
@@ -133,7 +127,7 @@ void BenchSoak(const SoakArgs& a) {
       w.first = i + 1 - static_cast<int>(ms.size());
       w.last = i;
       w.median_ms = UpperMedian(ms);
-      w.p95_ms = Percentile(ms, 0.95);
+      w.p95_ms = Quantile(ms, 0.95);
       w.rss_mib = ProcStatusMiB("VmRSS:").value_or(0);
       fmt::print("{:>6} {:>6} {:>12.3f} {:>10.3f} {:>8} {:>11} {:>9.1f}\n", w.first, w.last, w.median_ms, w.p95_ms,
                  w.tracked, w.map_points, w.rss_mib);

@@ -102,6 +102,9 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
                   "frame and scale");
   cmd->add_flag("--viewer", o->viewer,
                 "Also write viewer.html: the map, the trajectory and the per-frame figures in a browser (three.js)");
+  cmd->add_flag("--timings", o->timings,
+                "After the summary line, print each stage's time a frame (median, 90th and 99th percentile, max), the "
+                "throughput, the latency and the front end's median over the pose step's");
   cmd->add_option("--start", o->start, "First frame to process (index in the source)")->capture_default_str();
   cmd->add_option("--end", o->end, "Last frame to process, inclusive (-1: to the end)")->capture_default_str();
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
@@ -500,6 +503,7 @@ ImageJobSummary ImageRun::Finish() {
                         errors->alignment_result.gt_world_from_est_world.scale);
   line += RunTimesFields(times);
   fmt::print("{}\n", line);
+  if (options.timings) fmt::print("{}", StageTable(stages, frames_processed, times.wall_s));
   std::fflush(stdout);
 
   if (!failure.empty()) throw std::runtime_error(fmt::format("{} (outputs so far written to {})", failure, out_dir));

@@ -36,6 +36,7 @@ struct ImageJobOptions {
   // (relocalised against it, then extended, in its frame and scale).
   std::string save_map_path, load_map_path;
   bool viewer = false;  // also write viewer.html (apps/viewer.h) into the output folder
+  bool timings = false; // print the per-stage time table after the summary line (StageTable)
   frontend::FrontendOptions frontend;
   // Throws std::invalid_argument naming the flag.
   void Check() const;

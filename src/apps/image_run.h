@@ -66,6 +66,7 @@ struct ImageRun {
   std::optional<eval::TrajectoryErrors> errors;
   std::string eval_failure;
   ImageJobSummary sum;
+  std::vector<std::pair<std::string, Stage>> stages;  // per-stage times (report.json's stages_ms), in loop order
 
   void Open();
   void Setup(const slam::SystemOptions& system_in);

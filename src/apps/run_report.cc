@@ -26,7 +26,36 @@ nlohmann::json StageJson(const Stage& s) {
   for (double x : s.ms) sum += x;
   j["median_ms"] = UpperMedian(s.ms);
   j["mean_ms"] = sum / static_cast<double>(s.ms.size());
+  j["p90_ms"] = Quantile(s.ms, 0.9);
+  j["p99_ms"] = Quantile(s.ms, 0.99);
+  j["max_ms"] = *std::max_element(s.ms.begin(), s.ms.end());
   return j;
+}
+
+std::string StageTable(const std::vector<std::pair<std::string, Stage>>& stages, int64_t frames, double wall_s) {
+  std::string out = fmt::format("{:<24} {:>7} {:>9} {:>9} {:>9} {:>9}  (ms)\n", "stage", "frames", "median", "p90",
+                                "p99", "max");
+  const Stage* frontend = nullptr;
+  const Stage* pose = nullptr;
+  const Stage* frame = nullptr;
+  for (const auto& [name, s] : stages) {
+    if (name == "frontend_total") frontend = &s;
+    if (name == "track") pose = &s;
+    if (name == "frame_total") frame = &s;
+    if (s.ms.empty()) {
+      out += fmt::format("{:<24} {:>7}\n", name, 0);
+      continue;
+    }
+    out += fmt::format("{:<24} {:>7} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f}\n", name, s.ms.size(), UpperMedian(s.ms),
+                       Quantile(s.ms, 0.9), Quantile(s.ms, 0.99), *std::max_element(s.ms.begin(), s.ms.end()));
+  }
+  out += fmt::format("throughput {:.2f} frames/s ({} frames in {:.3f} s)", frames / std::max(wall_s, 1e-9), frames,
+                     wall_s);
+  if (frame && !frame->ms.empty())
+    out += fmt::format("; latency median {:.3f} ms, p99 {:.3f} ms", UpperMedian(frame->ms), Quantile(frame->ms, 0.99));
+  if (frontend && pose && !frontend->ms.empty() && !pose->ms.empty())
+    out += fmt::format("; front end / pose step {:.2f}", UpperMedian(frontend->ms) / UpperMedian(pose->ms));
+  return out + "\n";
 }
 
 nlohmann::json StatsJson(const eval::ErrorStats& s) {
@@ -146,7 +175,7 @@ void ImageRun::WriteReport() {
   sum.initialised = vslam->system().initialised();
   sum.localised = vslam->system().localised();
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
-      be_adjust, be_init, be_total, frame_total;
+      be_adjust, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
           remap_over_budget = 0, remap_refused = 0, refreshed = 0;
   double features_sum = 0;
@@ -249,11 +278,10 @@ void ImageRun::WriteReport() {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
     // pose step succeeded from it.
     int64_t tried = 0, pose_found = 0, reloc_tracked = 0;
-    Stage reloc_ms;
     for (const FrameRow& row : rows) {
       if (!row.reloc_tried) continue;
       ++tried;
-      reloc_ms.Add(row.reloc_ms);
+      reloc.Add(row.reloc_ms);
       if (row.reloc_inliers == 0) continue;
       ++pose_found;
       if (auto it = report_of_index.find(row.index);
@@ -264,26 +292,29 @@ void ImageRun::WriteReport() {
                            {"tried", tried},
                            {"pose_found", pose_found},
                            {"tracked", reloc_tracked},
-                           {"ms", StageJson(reloc_ms)}};
+                           {"ms", StageJson(reloc)}};
   }
   // Front end stages and back end stages, over the frames where each did some work (map and adjust run on
   // keyframes only, init before the map exists: the whole of System::Process then, the successful call too).
-  j["stages_ms"] = {{"decode", StageJson(decode)},
-                    {"frontend_total", StageJson(fe_total)},
-                    {"frontend_convert", StageJson(fe_convert)},
-                    {"frontend_pyramid", StageJson(fe_pyramid)},
-                    {"frontend_track", StageJson(fe_track)},
-                    {"frontend_anchor", StageJson(fe_anchor)},
-                    {"frontend_detect", StageJson(fe_detect)},
-                    {"frontend_remap", StageJson(fe_remap)},
-                    {"frontend_describe", StageJson(fe_describe)},
-                    {"frontend_describe_wait", StageJson(fe_wait)},
-                    {"init", StageJson(be_init)},
-                    {"track", StageJson(be_track)},
-                    {"map", StageJson(be_map)},
-                    {"adjust", StageJson(be_adjust)},
-                    {"backend_total", StageJson(be_total)},
-                    {"frame_total", StageJson(frame_total)}};
+  stages = {{"decode", decode},
+            {"frontend_total", fe_total},
+            {"frontend_convert", fe_convert},
+            {"frontend_pyramid", fe_pyramid},
+            {"frontend_track", fe_track},
+            {"frontend_anchor", fe_anchor},
+            {"frontend_detect", fe_detect},
+            {"frontend_remap", fe_remap},
+            {"frontend_describe", fe_describe},
+            {"frontend_describe_wait", fe_wait},
+            {"relocalise", reloc},
+            {"init", be_init},
+            {"track", be_track},
+            {"map", be_map},
+            {"adjust", be_adjust},
+            {"backend_total", be_total},
+            {"frame_total", frame_total}};
+  j["stages_ms"] = nlohmann::json::object();
+  for (const auto& [name, stage] : stages) j["stages_ms"][name] = StageJson(stage);
   if (errors) {
     j["ground_truth"] = {{"source", gt_origin},
                          {"poses", gt->size()},

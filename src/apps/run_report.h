@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -42,8 +43,14 @@ struct Stage {
   }
 };
 
-// {"count", "median_ms", "mean_ms"} of a stage (null medians when it never ran).
+// {"count", "median_ms", "mean_ms", "p90_ms", "p99_ms", "max_ms"} of a stage (only the count, and null median
+// and mean, when it never ran).
 nlohmann::json StageJson(const Stage& s);
+// The table `run --timings` prints: per stage the frames it ran on, its median, 90th and 99th percentile and
+// largest time; then the throughput (frames over the wall time), the latency of a frame (frame_total: read,
+// front end, relocalisation and back end, one after the other) and the front end's median over the pose
+// step's ("track"). Stages named as in report.json's stages_ms.
+std::string StageTable(const std::vector<std::pair<std::string, Stage>>& stages, int64_t frames, double wall_s);
 // {"count", "rmse", "mean", "median", "max"}, null where not finite.
 nlohmann::json StatsJson(const eval::ErrorStats& s);
 // frames.csv, one schema for every run: per frame the back end's report and its error against the ground truth

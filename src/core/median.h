@@ -1,5 +1,5 @@
 #pragma once
-// Medians of small sets of numbers (residuals, timings, depths). Both return 0 for an empty set.
+// Medians and quantiles of small sets of numbers (residuals, timings, depths). Each returns 0 for an empty set.
 #include <algorithm>
 #include <vector>
 
@@ -20,6 +20,15 @@ inline double Median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
   if (v.size() % 2 == 1) return v[mid];
   return 0.5 * (v[mid] + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid)));
+}
+
+// The element of rank floor(q * n) of the sorted set (q in [0, 1], clamped to the last): a value of the set, the
+// upper median at q = 0.5.
+inline double Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::max(0.0, q) * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
 }
 
 }  // namespace mcslam

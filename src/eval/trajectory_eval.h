@@ -124,10 +124,12 @@ struct TrajectoryErrors {
   ErrorStats rpe_trans_m;  // of the relative pose error, on the aligned (for Sim(3): scaled) estimate
   ErrorStats rpe_rot_deg;
   double gt_path_length_m = 0;  // length of the ground-truth path through the matched poses
-  // The estimate is a mirror image of the truth (a depth-reversed monocular map): the least-squares linear
-  // map from the estimated positions onto the true ones has a negative determinant (positions spread in 3D),
-  // or the orientations are more than 90 degrees off after the alignment (median), which no proper rotation
-  // of a mirrored trajectory can undo.
+  // The estimate is a mirror image of the truth (a depth-reversed monocular map): a similarity with a
+  // reflection maps the estimated positions onto the true ones with at most half the rms residual of the best
+  // Sim(3) (positions spread in 3D; a trajectory that is only wrong fits neither), or the Sim(3) fits the
+  // positions (rms residual at most half their spread: a flat path mirrored across its plane) and the
+  // orientations are still more than 90 degrees off after it (median), which no proper rotation of a mirrored
+  // trajectory can undo.
   bool mirrored = false;
   size_t matched() const { return frames.size(); }
 };
@@ -169,7 +171,7 @@ void WriteFrameErrorsCsv(const std::string& path, const TrajectoryErrors& errors
 
 // One line, space-separated key=value, no newline, e.g.
 // "matched=300 align=sim3 scale=1 ate_rmse=0.0123 ate_mean=... ate_median=... ate_max=... rot_mean_deg=...
-//  rot_median_deg=... rot_max_deg=... rot_orient_mean_deg=... rot_orient_median_deg=... rpe_delta=1 rpe_trans_rmse=... rpe_trans_mean=... rpe_rot_mean_deg=..."
+//  rot_median_deg=... rot_max_deg=... rot_orient_mean_deg=... rot_orient_median_deg=... rpe_delta=1 rpe_trans_rmse=... rpe_trans_mean=... rpe_rot_mean_deg=... mirrored=0|1"
 // Values with 6 significant digits ({:.6g}), so tiny errors stay visible.
 std::string FormatSummary(const TrajectoryErrors& errors);
 

@@ -98,9 +98,10 @@ TEST(CliEval, SegmentsShowAScaleDrift) {
   EXPECT_NEAR(Field(r.output, "scale_max_over_min"), 1.25, 1e-5) << r.output;
   EXPECT_NE(r.output.find("segment=1 poses=50-99 first_stamp="), std::string::npos) << r.output;
   // The segments' figures have keys of their own: the summary's scale is still the first and only scale=.
-  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '='), 16 + 2 + 2 * 7) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '='), 17 + 2 + 2 * 7) << r.output;  // summary, segments, 2 x 7
   EXPECT_EQ(r.output.find(" scale=", r.output.find('\n')), std::string::npos) << r.output;
   EXPECT_GT(Field(r.output, "ate_rmse"), 0.01) << r.output;  // the whole run's, hiding the drift
+  EXPECT_EQ(Field(r.output, "mirrored"), 0) << r.output;     // a drifting scale is no mirror image
   // Too many segments for 100 poses: an error, and nothing printed as if it had worked.
   const auto bad = RunMcslam("eval " + (dir / "gt.txt") + " " + (dir / "est.txt") + " --segments 40");
   EXPECT_EQ(bad.exit_code, 1) << bad.output;

@@ -165,7 +165,7 @@ TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
   TempDir dir;
   const std::string folder = WriteImageFolder(dir, "room");
   const std::string out = dir / "out";
-  const auto r = RunMcslam(fmt::format("run {} --out {} --gt {} --format kitti --overlay {} --plot {} --hypotheses 65536",
+  const auto r = RunMcslam(fmt::format("run {} --out {} --gt {} --format kitti --overlay {} --plot {} --hypotheses 65536 --timings",
                                        folder, out, dir / "gt.txt", dir / "overlay.mp4", dir / "plot.png"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* name : {"trajectory.txt", "trajectory_smoothed.txt", "trajectory_kitti.txt",
@@ -193,7 +193,12 @@ TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
   for (const char* stage : {"frontend_total", "frontend_track", "frontend_detect", "frontend_describe", "track", "map"}) {
     EXPECT_GT(j["stages_ms"][stage]["count"].get<int>(), 0) << stage;
     EXPECT_GT(j["stages_ms"][stage]["median_ms"].get<double>(), 0.0) << stage;
+    EXPECT_GE(j["stages_ms"][stage]["p90_ms"].get<double>(), j["stages_ms"][stage]["median_ms"].get<double>()) << stage;
+    EXPECT_GE(j["stages_ms"][stage]["max_ms"].get<double>(), j["stages_ms"][stage]["p99_ms"].get<double>()) << stage;
   }
+  // --timings: the table after the summary line, one row per stage of report.json.
+  for (const auto& [stage, _] : j["stages_ms"].items()) EXPECT_NE(r.output.find("\n" + stage + " "), std::string::npos) << stage;
+  EXPECT_NE(r.output.find("; front end / pose step "), std::string::npos) << r.output;
   EXPECT_GT(j["fps"].get<double>(), 0.0);
   testing::ExpectSaneRunTimes(r.output, out + "/report.json");
   // The camera slides 1.8 m through a room 6 m deep; rendered, noise-free frames. Measured ATE 5 mm; 2 cm is
