@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <stdexcept>
 #include <unordered_set>
 
@@ -233,7 +234,12 @@ MapFile ParseMapFile(const std::vector<uint8_t>& bytes, const std::string& what)
       if (!points[i].contains(key)) continue;
       const std::vector<double> d = rd.Numbers(points[i], key, where, kMapDescriptorLength);
       out->emplace();
-      for (int k = 0; k < kMapDescriptorLength; ++k) (**out)[k] = static_cast<float>(d[k]);
+      for (int k = 0; k < kMapDescriptorLength; ++k) {
+        // Descriptors are floats: a finite double beyond a float's range would be written back as infinity.
+        if (!(std::abs(d[k]) <= std::numeric_limits<float>::max()))
+          rd.Fail(where + "." + key, fmt::format("holds {} (beyond a float's range)", d[k]));
+        (**out)[k] = static_cast<float>(d[k]);
+      }
     }
     map.points.push_back(std::move(p));
   }
