@@ -27,7 +27,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
             sys.exit(f"timing_table: cannot read {path}: {e}")
     if not reports:
         sys.exit(f"timing_table: no runs in {runs_tsv}")
-    columns = sorted(reports, key=lambda k: (list(dict.fromkeys(n for n, _ in reports)).index(k[0]), k[1] != "baseline"))
+    sequences = list(dict.fromkeys(name for name, _ in reports))  # in the order they ran
+    columns = sorted(reports, key=lambda k: (sequences.index(k[0]), k[1] != "baseline"))
 
     def med(rs, stage, field="median_ms"):
         vals = [r["stages_ms"][stage][field] for r in rs if r["stages_ms"][stage].get(field) is not None]
@@ -72,8 +73,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
     for label, f in rows.items():
         out.append(f"| {label} | " + " | ".join(f(reports[k]) for k in columns) + " |")
     out.append("")
-    # What the frame's time goes to, from the figures above: the largest of the parts that run one after the
-    # other (read, front end, back end's pose step, map and adjust), and the slowest frame's cause.
+    # What the frame's time goes to, from the figures above: the largest two of the parts that run one after the
+    # other (read, front end, the pose step, map and adjust), and the slowest frame's time.
     parts = [("decode", "reading the frame"), ("frontend_total", "the front end"), ("track", "the pose step"),
              ("map", "triangulation"), ("adjust", "the point and local bundle adjustment")]
     for k in columns:
