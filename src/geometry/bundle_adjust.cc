@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include <ceres/ceres.h>
+#include <ceres/product_manifold.h>
 #include <ceres/rotation.h>
 #include <fmt/format.h>
 
@@ -27,20 +28,41 @@ double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& po
 
 namespace {
 
-// Reprojection residual in pixels; the quaternion is stored (x, y, z, w) as Eigen does.
+// Reprojection residual in pixels of a camera's pose block: its rotation as a quaternion stored (x, y, z, w) as
+// Eigen does, then its translation. One block a camera, not two: the Schur complement then has a quarter of the
+// camera-camera cells (Ceres locks each cell it updates).
 struct ReprojectionError {
   ReprojectionError(const Eigen::Vector2d& uv, double focal) : u(uv.x()), v(uv.y()), f(focal) {}
   template <typename T>
-  bool operator()(const T* q_xyzw, const T* t, const T* X, T* r) const {
-    const T q_wxyz[4] = {q_xyzw[3], q_xyzw[0], q_xyzw[1], q_xyzw[2]};
+  bool operator()(const T* pose, const T* X, T* r) const {
+    const T q_wxyz[4] = {pose[3], pose[0], pose[1], pose[2]};
     T p[3];
     ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
-    p[0] += t[0], p[1] += t[1], p[2] += t[2];
+    p[0] += pose[4], p[1] += pose[5], p[2] += pose[6];
     if (!(p[2] > T(1e-9))) return false;  // a step that puts it behind the camera: Ceres rejects the step
     r[0] = T(f) * (p[0] / p[2] - T(u));
     r[1] = T(f) * (p[1] / p[2] - T(v));
     return true;
   }
+  double u, v, f;
+};
+
+// The same residual seen by a camera held fixed: only the point varies, so its Jacobian is the only one formed
+// (a quarter of the dual numbers' width). Most of a local adjustment's observations are of this kind.
+struct FixedCameraReprojectionError {
+  FixedCameraReprojectionError(const Pose& cam_from_world, const Eigen::Vector2d& uv, double focal)
+      : R(cam_from_world.q.normalized().toRotationMatrix()), t(cam_from_world.t), u(uv.x()), v(uv.y()), f(focal) {}
+  template <typename T>
+  bool operator()(const T* X, T* r) const {
+    T p[3];
+    for (int i = 0; i < 3; ++i) p[i] = T(R(i, 0)) * X[0] + T(R(i, 1)) * X[1] + T(R(i, 2)) * X[2] + T(t[i]);
+    if (!(p[2] > T(1e-9))) return false;
+    r[0] = T(f) * (p[0] / p[2] - T(u));
+    r[1] = T(f) * (p[1] / p[2] - T(v));
+    return true;
+  }
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
   double u, v, f;
 };
 
@@ -65,12 +87,10 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
     throw std::invalid_argument("bundle adjustment: one fixed flag per point is needed (or none)");
   BundleAdjustSummary out;
   out.initial_rms_px = RmsPx(cams, pts, obs, options.focal_px);
-  std::vector<std::array<double, 4>> q(cams.size());
-  std::vector<std::array<double, 3>> t(cams.size());
+  std::vector<std::array<double, 7>> pose(cams.size());  // qx qy qz qw tx ty tz
   for (size_t i = 0; i < cams.size(); ++i) {
     const Eigen::Quaterniond qi = cams[i].q.normalized();
-    q[i] = {qi.x(), qi.y(), qi.z(), qi.w()};
-    t[i] = {cams[i].t.x(), cams[i].t.y(), cams[i].t.z()};
+    pose[i] = {qi.x(), qi.y(), qi.z(), qi.w(), cams[i].t.x(), cams[i].t.y(), cams[i].t.z()};
   }
   ceres::Problem problem;
   for (const BundleObservation& o : obs) {
@@ -80,21 +100,22 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
       ++out.left_out_behind;
       continue;
     }
-    auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 4, 3, 3>(
-        new ReprojectionError(o.uv_norm, options.focal_px));
     ceres::LossFunction* loss = options.cauchy ? static_cast<ceres::LossFunction*>(new ceres::CauchyLoss(options.huber_px))
                                                : new ceres::HuberLoss(options.huber_px);
-    problem.AddResidualBlock(cost, loss, q[o.camera].data(), t[o.camera].data(),
-                             pts[o.point].data());
-  }
-  for (size_t i = 0; i < cams.size(); ++i) {
-    if (!problem.HasParameterBlock(q[i].data())) continue;
-    problem.SetManifold(q[i].data(), new ceres::EigenQuaternionManifold());
-    if (fixed[i]) {
-      problem.SetParameterBlockConstant(q[i].data());
-      problem.SetParameterBlockConstant(t[i].data());
+    if (fixed[static_cast<size_t>(o.camera)]) {
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FixedCameraReprojectionError, 2, 3>(
+                                   new FixedCameraReprojectionError(cams[o.camera], o.uv_norm, options.focal_px)),
+                               loss, pts[o.point].data());
+      continue;
     }
+    auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 7, 3>(
+        new ReprojectionError(o.uv_norm, options.focal_px));
+    problem.AddResidualBlock(cost, loss, pose[o.camera].data(), pts[o.point].data());
   }
+  for (size_t i = 0; i < cams.size(); ++i)
+    if (problem.HasParameterBlock(pose[i].data()))  // a free camera's (fixed ones' residuals take only the point)
+      problem.SetManifold(pose[i].data(),
+                          new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
   for (size_t j = 0; j < fixed_points.size(); ++j)
     if (fixed_points[j] && problem.HasParameterBlock(pts[j].data())) problem.SetParameterBlockConstant(pts[j].data());
   ceres::Solver::Options so;
@@ -105,7 +126,8 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
   for (size_t i = 0; i < cams.size(); ++i)
-    cams[i] = Pose(Eigen::Quaterniond(q[i][3], q[i][0], q[i][1], q[i][2]), Eigen::Vector3d(t[i][0], t[i][1], t[i][2]));
+    cams[i] = Pose(Eigen::Quaterniond(pose[i][3], pose[i][0], pose[i][1], pose[i][2]),
+                   Eigen::Vector3d(pose[i][4], pose[i][5], pose[i][6]));
   out.converged = summary.termination_type == ceres::CONVERGENCE;
   out.iterations = static_cast<int>(summary.iterations.size());
   out.final_rms_px = RmsPx(cams, pts, obs, options.focal_px);
