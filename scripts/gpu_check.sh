@@ -7,7 +7,10 @@
 #      round) and once as `mcslam run` does (3 rounds), and `bench points --compare` on one keyframe's
 #      adjustment and on successive keyframes' (evaluations per second; per-frame / per-call latency including
 #      the transfers; bytes sent per call),
-#   3. the paper's noisy synthetic scenario run end to end on each backend, three times each (wall and CPU time).
+#   3. the paper's noisy synthetic scenario run end to end on each backend, three times each (wall and CPU time),
+#   4. the shared real sequences in the bundle, default settings, each backend GPU_CHECK_RUNS times (default 2),
+#      once per variant of GPU_CHECK_VARIANTS (';'-separated extra `mcslam run` arguments; default: none).
+# GPU_CHECK_ONLY=real runs step 4 alone (a diagnosis of whole runs, without the tests and benchmarks).
 set -uo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 OUT_DIR=${1:-${OUT:-/tmp/gpu_check}}
@@ -37,6 +40,7 @@ if [[ "${GPU_CHECK_LOADER:-}" == carried ]] || ! probe=$("${RUN[@]}" "$W/bin/mcs
 fi
 mcslam() { "${RUN[@]}" "$W/bin/mcslam" "$@"; }
 
+if [[ "${GPU_CHECK_ONLY:-}" != real ]]; then
 echo "== CUDA tests"
 step "${RUN[@]}" "$W/bin/test_compute" --gtest_filter='Cuda*'
 
@@ -88,20 +92,27 @@ for i in 1 2 3; do
     fi
   done
 done
+fi  # GPU_CHECK_ONLY
+lscpu | grep -E "^Model name|^CPU\(s\)"
+IFS=';' read -r -a variants <<<"${GPU_CHECK_VARIANTS:-}"
+[[ ${#variants[@]} == 0 ]] && variants=("")
 for seq in 7scenes_redkitchen_frames000-299 kitti_odometry_06_frames000-050; do
   [[ -d "$HERE/data/$seq" ]] || { echo "== $seq: not in the bundle, skipped"; continue; }
-  echo "== $seq, default settings, 2 runs on each backend (stages_ms medians from report.json)"
   cam=()
   [[ $seq == 7scenes* ]] && echo "525 525 320 240" > "$W/cam7.txt" && cam=(--camera "$W/cam7.txt")
-  for i in 1 2; do
-    for b in cpu cuda; do
-      echo -n "$b run $i: "
-      if ! mcslam run "$HERE/data/$seq" "${cam[@]}" --backend "$b" --out "$W/real_$b" >"$W/run.log" 2>&1; then
-        echo "failed:"; tail -3 "$W/run.log"; failed=1
-      else
-        tail -1 "$W/run.log"
-        python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print('  stages_ms median:', {k: round(v['median_ms'],2) for k,v in r['stages_ms'].items() if isinstance(v,dict) and v.get('median_ms') is not None})" "$W/real_$b/report.json" 2>/dev/null || true
-      fi
+  for variant in "${variants[@]}"; do
+    read -r -a extra <<<"$variant"
+    echo "== $seq, default settings${variant:+ and $variant}, ${GPU_CHECK_RUNS:-2} runs on each backend (stages_ms medians from report.json)"
+    for ((i = 1; i <= ${GPU_CHECK_RUNS:-2}; ++i)); do
+      for b in cpu cuda; do
+        echo -n "$b run $i: "
+        if ! mcslam run "$HERE/data/$seq" "${cam[@]}" "${extra[@]}" --backend "$b" --out "$W/real_$b" >"$W/run.log" 2>&1; then
+          echo "failed:"; tail -3 "$W/run.log"; failed=1
+        else
+          tail -1 "$W/run.log"
+          python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print('  stages_ms median:', {k: round(v['median_ms'],2) for k,v in r['stages_ms'].items() if isinstance(v,dict) and v.get('median_ms') is not None})" "$W/real_$b/report.json" 2>/dev/null || true
+        fi
+      done
     done
   done
 done

@@ -31,6 +31,14 @@ namespace mcslam::apps {
 
 namespace {
 
+// `mcslam run`'s System options before its flags: the library's, with each keyframe's local bundle adjustment
+// solved beside the next frame (MappingOptions::local_ba_async; the run flushes it after its last frame).
+slam::SystemOptions RunSystemDefaults() {
+  slam::SystemOptions options;
+  options.mapping.local_ba_async = true;
+  return options;
+}
+
 struct RunArgs {
   std::string input, out, backend = "cpu";
   bool known_map = false;
@@ -38,7 +46,7 @@ struct RunArgs {
   std::string init_method = "8point";
   std::string pose_method = "mc", structure_method = "mc";
   PoseFlags pose;
-  slam::SystemOptions system;
+  slam::SystemOptions system = RunSystemDefaults();
   double smooth_alpha = 0.5;
   ImageJobOptions image;
   std::string options_from;  // an earlier run's report.json
@@ -426,6 +434,11 @@ void RegisterRun(CLI::App& app) {
                   "with their points (bundle adjustment, the older window keyframes fixed; 0: off, the paper's "
                   "back end)")
       ->check(CLI::Range(0, 64))
+      ->capture_default_str();
+  cmd->add_option("--local-ba-async", args->system.mapping.local_ba_async,
+                  "Solve each keyframe's local bundle adjustment on its own thread while the next frame is read and "
+                  "its features tracked; applied before that frame's pose step (false: in place, the next frame "
+                  "waits; the same poses on a folder of observations)")
       ->capture_default_str();
   cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
                   "Smallest parallax for a new point (largest angle between its viewing rays)")

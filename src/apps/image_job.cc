@@ -276,6 +276,23 @@ void ImageRun::RunFrames() {
   const auto t_start = Clock::now();
   auto elapsed_s = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
 
+  auto put_reports = [&](const std::vector<slam::FrameReport>& step_reports) {
+    for (const slam::FrameReport& r : step_reports) {
+      if (const std::optional<slam::FrameStatus> replaced = log.Put(r)) {
+        tracked -= *replaced == slam::FrameStatus::kTracked;
+        lost -= *replaced == slam::FrameStatus::kLost;
+      }
+      tracked += r.status == slam::FrameStatus::kTracked;
+      lost += r.status == slam::FrameStatus::kLost;
+      if (r.init_rejected) init_rejections.push_back({{"frame", r.index}, {"why", r.note}});
+      if (r.initialisation && !r.note.empty() && !init_frame) {
+        init_frame = r.index;
+        init_note = r.note;
+        progress.Clear();
+        spdlog::info("frame {}: {}", r.index, r.note);
+      }
+    }
+  };
   try {
     io::Frame frame;
     while (!Interrupted()) {
@@ -338,21 +355,7 @@ void ImageRun::RunFrames() {
       }
       ++frames_processed;
       const slam::FrameReport* current = nullptr;
-      for (const slam::FrameReport& r : step.reports) {
-        if (const std::optional<slam::FrameStatus> replaced = log.Put(r)) {
-          tracked -= *replaced == slam::FrameStatus::kTracked;
-          lost -= *replaced == slam::FrameStatus::kLost;
-        }
-        tracked += r.status == slam::FrameStatus::kTracked;
-        lost += r.status == slam::FrameStatus::kLost;
-        if (r.init_rejected) init_rejections.push_back({{"frame", r.index}, {"why", r.note}});
-        if (r.initialisation && !r.note.empty() && !init_frame) {
-          init_frame = r.index;
-          init_note = r.note;
-          progress.Clear();
-          spdlog::info("frame {}: {}", r.index, r.note);
-        }
-      }
+      put_reports(step.reports);
       if (auto it = report_of_index.find(frame.index); it != report_of_index.end()) current = &reports[it->second];
       if (current) {
         const bool is_lost = current->status == slam::FrameStatus::kLost;
@@ -377,6 +380,11 @@ void ImageRun::RunFrames() {
     }
   } catch (const std::exception& e) {
     failure = e.what();  // outputs first, then the error
+  }
+  try {
+    put_reports(vslam->Finish());  // the last keyframe's report, revised by its local bundle adjustment
+  } catch (const std::exception& e) {
+    if (failure.empty()) failure = e.what();
   }
   times = clock.Elapsed();
   const double wall_s = times.wall_s;

@@ -35,7 +35,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames
                                                 starving_parallax_deg, max_reprojection_px, retriangulate_after_frames,
                                                 history_frames, adjust, adjust_threshold_px, candidate_threshold_px,
                                                 samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px,
-                                                local_ba_keyframes, local_ba_loss_sigmas, local_ba_min_loss_px)
+                                                local_ba_keyframes, local_ba_loss_sigmas, local_ba_min_loss_px,
+                                                local_ba_async)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, predict_frames)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,
                                                 ba_fixed_keyframes, tracker, init, mapping, smoother,

@@ -175,7 +175,7 @@ void ImageRun::WriteReport() {
   sum.initialised = vslam->system().initialised();
   sum.localised = vslam->system().localised();
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
-      be_adjust, be_init, be_total, frame_total, reloc;
+      be_adjust, be_adjust_points, be_local_ba, be_local_ba_wait, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
           remap_over_budget = 0, remap_refused = 0, refreshed = 0;
   double features_sum = 0;
@@ -213,6 +213,8 @@ void ImageRun::WriteReport() {
     sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
     sum.keyframes += r.keyframe;
     be_track.Add(r.track_ms), be_map.Add(r.map_ms), be_adjust.Add(r.adjust_ms);
+    if (r.local_ba) be_local_ba.Add(r.local_ba_ms), be_local_ba_wait.Add(r.local_ba_wait_ms);
+    be_adjust_points.Add(r.adjust_points_ms);
   }
   sum.fps = frames_processed / std::max(times.wall_s, 1e-9);
   if (errors) sum.ate_rmse_m = errors->ate_m.rmse;
@@ -295,7 +297,9 @@ void ImageRun::WriteReport() {
                            {"ms", StageJson(reloc)}};
   }
   // Front end stages and back end stages, over the frames where each did some work (map and adjust run on
-  // keyframes only, init before the map exists: the whole of System::Process then, the successful call too).
+  // keyframes only, local_ba on those whose window was adjusted, init before the map exists: the whole of
+  // System::Process then, the successful call too). local_ba_wait: what the next frame waited for a local
+  // adjustment solved beside it (MappingOptions::local_ba_async).
   stages = {{"decode", decode},
             {"frontend_total", fe_total},
             {"frontend_convert", fe_convert},
@@ -311,6 +315,9 @@ void ImageRun::WriteReport() {
             {"track", be_track},
             {"map", be_map},
             {"adjust", be_adjust},
+            {"adjust_points", be_adjust_points},
+            {"local_ba", be_local_ba},
+            {"local_ba_wait", be_local_ba_wait},
             {"backend_total", be_total},
             {"frame_total", frame_total}};
   j["stages_ms"] = nlohmann::json::object();

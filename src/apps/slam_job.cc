@@ -29,6 +29,10 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
       if (on_frame) on_frame(r);
     }
   }
+  for (const slam::FrameReport& r : system.Flush()) {  // MappingOptions::local_ba_async: the last keyframe's
+    log.Put(r);
+    if (on_frame) on_frame(r);
+  }
   res.reports = std::move(log.reports);
   res.times = clock.Elapsed();
   res.initialised = system.initialised();

@@ -57,7 +57,16 @@ void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
         first_descriptors_.emplace(f.feature_id, *d);
 }
 
+std::vector<slam::FrameReport> VisualSlam::Finish() {
+  std::vector<slam::FrameReport> reports = system_.Flush();
+  if (const auto it = std::find_if(reports.rbegin(), reports.rend(), [](const slam::FrameReport& r) { return r.has_pose; });
+      it != reports.rend())
+    latest_cam_from_world_ = it->cam_from_world;
+  return reports;
+}
+
 io::MapFile VisualSlam::ExportMap() {
+  system_.Flush();  // nothing is pending after Finish; a caller that did not call it loses only the report
   io::MapFile out;
   out.camera = camera_;
   for (const slam::MapPoint& p : system_.map().points()) {
@@ -167,6 +176,9 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
     if (t.descriptor && !Removed(system_.map().Find(t.feature_id))) lost_descriptors_[t.feature_id] = *t.descriptor;
   for (int64_t id : fr.remapped_ids) lost_descriptors_.erase(id);
 
+  // The last keyframe's local bundle adjustment (local_ba_async) was solved while the front end ran: applied
+  // before the map is matched or tracked against.
+  step.reports = system_.Flush();
   step.before_init = !system_.initialised();
   FrameObservations obs = frontend::ToObservations(fr);
   // While the System tracks a provisional map (a bridge over the unmapped), every frame is also matched against
@@ -178,7 +190,8 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   }
   after_gap_ = false;
   const auto t_backend = Clock::now();
-  step.reports = system_.Process(obs);
+  std::vector<slam::FrameReport> reports = system_.Process(obs);
+  step.reports.insert(step.reports.end(), std::make_move_iterator(reports.begin()), std::make_move_iterator(reports.end()));
   step.backend_ms = MsSince(t_backend);
   KeepFirstLooks(obs);
   if (const slam::FrameReport* current = step.current()) {

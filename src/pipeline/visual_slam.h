@@ -78,6 +78,9 @@ class VisualSlam {
   // does not take the image's pixel type: nothing has changed then but that the next frame counts as coming
   // after a gap. Other exceptions (the System's) propagate.
   VisualSlamStep Process(const cv::Mat& image, int64_t index, double stamp_s);
+  // After the last frame: the reports that the System still holds back (MappingOptions::local_ba_async: the last
+  // keyframe's, revised by its local bundle adjustment). Call it before reading the final map.
+  std::vector<slam::FrameReport> Finish();
   // A frame that could not be read: the camera may have moved far meanwhile, so the next frame is relocalised.
   void SkipFrame() { after_gap_ = true; }
 

@@ -140,6 +140,37 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
   point_normals_ = compute::NormalTable(options_.mapping.samples, options_.seed, /*stream=*/2);
 }
 
+System::~System() {
+  if (pending_ba_ && pending_ba_->solved.valid()) pending_ba_->solved.wait();  // its thread reads *pending_ba_
+}
+
+std::vector<FrameReport> System::Flush() {
+  std::vector<FrameReport> out;
+  if (!pending_ba_) return out;
+  const std::unique_ptr<LocalBa> ba = std::move(pending_ba_);
+  const auto t0 = std::chrono::steady_clock::now();
+  const double solve_ms = ba->solved.get();  // rethrows what the solve threw
+  FrameReport r = ba->report;
+  r.local_ba_wait_ms = Ms(t0);
+  const auto t1 = std::chrono::steady_clock::now();
+  ApplyLocalBa(*ba, &r);
+  // What TrackFrame reports after the adjustment when it is solved in place.
+  r.cam_from_world = map_.frames[ba->slot].cam_from_world;
+  ResidualStats(ba->slot, &r);
+  r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+  r.local_ba_ms = ba->prepare_ms + solve_ms + Ms(t1);
+  r.adjust_ms = r.adjust_points_ms + r.local_ba_ms;
+  out.push_back(std::move(r));
+  return out;
+}
+
+std::vector<FrameReport> System::Process(const FrameObservations& frame) {
+  std::vector<FrameReport> out = Flush();
+  std::vector<FrameReport> now = ProcessFrame(frame);
+  out.insert(out.end(), std::make_move_iterator(now.begin()), std::make_move_iterator(now.end()));
+  return out;
+}
+
 void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes) {
   if (!map_.frames.empty() || initialised_) throw std::logic_error("System::StartInMap: only before the first frame");
   for (MapPoint& p : points) {
@@ -165,7 +196,7 @@ void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> k
   if (!depths.empty()) tracker_->SetTranslationFloor(options_.sigma_trans_floor_rel_depth * UpperMedian(depths));
 }
 
-std::vector<FrameReport> System::Process(const FrameObservations& frame) {
+std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
   FrameRecord rec;
   rec.index = frame.index;
   rec.stamp_s = frame.stamp_s;

@@ -121,7 +121,7 @@ struct MappingOptions {
   double sigma_scale = 1.0;                  // Sigma_j = diag(scale * |dz| + floor), dz from Eqs. 8-9
   double sigma_floor_rel_depth = 0.01;       // floor, as a fraction of the point's depth
   double max_distance_px = 20.0;             // cap of one observation's contribution to a sample's score
-  // Local bundle adjustment (System::LocalBundleAdjust), after each keyframe's Monte Carlo point adjustment:
+  // Local bundle adjustment (System::PrepareLocalBa), after each keyframe's Monte Carlo point adjustment:
   // the poses of the newest local_ba_keyframes keyframes and every point they see, refined together; the
   // twice as many keyframes before them and the Fibonacci window's older ones held fixed (they hold the gauge
   // and the scale). The paper's estimators never move a pose and a point together: each new point is
@@ -136,6 +136,14 @@ struct MappingOptions {
   // would follow, weighs little.
   double local_ba_loss_sigmas = 2.385;
   double local_ba_min_loss_px = 0.3;
+  // The local bundle adjustment of a keyframe solved on a thread of its own while the caller goes on to the next
+  // frame (reads it, runs its front end), and applied at the start of the next System::Process (or Flush): the
+  // next frame's pose step and mapping see the adjusted map as they would without it, so a folder of
+  // observations gives the same result to the last bit; only what the caller reads between the two calls (an
+  // image run's remap requests, its overlay) sees the map before the adjustment. The keyframe's report comes
+  // first in the next call's reports, revised (its adjusted pose, residuals and times). Off by default: a
+  // caller that turns it on must call Flush after its last frame. `mcslam run` turns it on.
+  bool local_ba_async = false;
   void Check() const;
 };
 
@@ -229,6 +237,11 @@ struct FrameReport {
   double reproj_mean_px = 0;    // mean residual of the inlier observations of map points in this frame
   double reproj_median_px = 0;  // median residual of all observations of map points in this frame
   double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
+  // adjust_ms's two parts on a keyframe: the Monte Carlo point adjustment (Algorithm 2) and the local bundle
+  // adjustment after it (MappingOptions::local_ba_keyframes; with local_ba_async its preparation, solve and
+  // application, and local_ba_wait_ms what the next frame's Process waited for the solve to end).
+  double adjust_points_ms = 0, local_ba_ms = 0, local_ba_wait_ms = 0;
+  bool local_ba = false;  // a local bundle adjustment refined this keyframe's window (not skipped)
   std::string note;             // why lost / waiting; how posed when not by the pose step
   bool rotation_only = false;   // tracked by its rotation about the last centre (SystemOptions::rotation_only)
   bool provisional = false;     // posed in a provisional map whose scale was guessed (SystemOptions::bridge)
@@ -248,6 +261,7 @@ struct BridgeState {
 
 class System {
  public:
+  ~System();  // waits for a local bundle adjustment still being solved (MappingOptions::local_ba_async)
   System(const PinholeCamera& camera, const SystemOptions& options, std::unique_ptr<compute::PoseKernel> pose_kernel,
          std::unique_ptr<compute::PointKernel> point_kernel);
 
@@ -255,6 +269,10 @@ class System {
   // when the map is initialised, also the frames from the reference frame on, and those before it that
   // could be placed (their reports replace the earlier 'waiting' ones).
   std::vector<FrameReport> Process(const FrameObservations& frame);
+  // MappingOptions::local_ba_async: waits for the last keyframe's local bundle adjustment, applies it and returns
+  // that keyframe's revised report (none when nothing is pending). Process does it first; call it after the last
+  // frame, before reading the final map.
+  std::vector<FrameReport> Flush();
 
   // After the track is lost: the pose of a frame from features matched to map points by their look alone
   // (no pose prior), by RANSAC PnP on the points that are in the map. nullopt when fewer than
@@ -364,8 +382,13 @@ class System {
   // MappingOptions::local_ba_keyframes: the newest keyframes' poses and their points by one bundle
   // adjustment, the keyframes before them fixed (MappingOptions says which), a loaded map's points fixed. Not
   // while settling (the settling adjusts the whole window), on a provisional map (its scale is not the older
-  // keyframes'), nor over fewer points than the adjusted poses have parameters.
-  void LocalBundleAdjust(int slot, FrameReport* r);
+  // keyframes'), nor over fewer points than the adjusted poses have parameters. In three parts: the problem
+  // (nullptr when it is skipped), copied out of the map; its solve (LocalBa::Solve, on another thread with
+  // local_ba_async); the solution written back to the map.
+  struct LocalBa;
+  std::unique_ptr<LocalBa> PrepareLocalBa(int slot);
+  void ApplyLocalBa(const LocalBa& ba, FrameReport* r);
+  std::vector<FrameReport> ProcessFrame(const FrameObservations& frame);
   PoseEstimate EstimatePosePnp(const std::vector<PointObservation>& obs, std::vector<double>* res,
                                std::vector<uint8_t>* inl) const;
   std::vector<int> WindowSlots() const;
@@ -415,6 +438,8 @@ class System {
   std::optional<BridgeState> bridge_;
   // The points of a map this run started in (StartInMap): the local bundle adjustment holds them fixed.
   std::unordered_set<int64_t> loaded_points_;
+  // MappingOptions::local_ba_async: the adjustment being solved, and the report of its keyframe.
+  std::unique_ptr<LocalBa> pending_ba_;
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last pure-rotation frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);

@@ -178,9 +178,10 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   r->adjusted += static_cast<int>(wp.pts.size()) - removed;
 }
 
-void System::LocalBundleAdjust(int slot, FrameReport* r) {
+std::unique_ptr<System::LocalBa> System::PrepareLocalBa(int slot) {
+  const auto t0 = std::chrono::steady_clock::now();
   const MappingOptions& mo = options_.mapping;
-  if (mo.local_ba_keyframes == 0 || settling_ || bridging()) return;
+  if (mo.local_ba_keyframes == 0 || settling_ || bridging()) return nullptr;
   // Posed keyframes whose features are kept, newest first: the first local_ba_keyframes are adjusted.
   std::vector<int> recent;
   for (auto it = map_.keyframes.rbegin(); it != map_.keyframes.rend() && *it >= pruned_until_ &&
@@ -188,7 +189,7 @@ void System::LocalBundleAdjust(int slot, FrameReport* r) {
        ++it)
     if (map_.frames[*it].has_pose) recent.push_back(*it);
   const int n_adjusted = std::min<int>(mo.local_ba_keyframes, static_cast<int>(recent.size()));
-  if (n_adjusted < 3) return;
+  if (n_adjusted < 3) return nullptr;
   // Held fixed: the next twice as many keyframes (they see most of the same points: the gauge and the scale
   // pass through them; with only the Fibonacci keyframes fixed, KITTI 06's scale slid 5 % in its last 17
   // frames with 4 adjusted), then the Fibonacci window's older keyframes (the long-lived points).
@@ -211,13 +212,13 @@ void System::LocalBundleAdjust(int slot, FrameReport* r) {
     if (keep[i] == 0) keep[i] = static_cast<int>(wp.pts.size()), wp.pts.push_back(all.pts[i]), wp.X.push_back(all.X[i]);
   for (const geometry::BundleObservation& o : all.obs)
     if (keep[static_cast<size_t>(o.point)] >= 0) wp.obs.push_back({o.camera, keep[static_cast<size_t>(o.point)], o.uv_norm});
-  if (wp.pts.empty()) return;
+  if (wp.pts.empty()) return nullptr;
   // Fewer points than the adjusted poses have parameters (6 each): the poses are held by too few views to
   // be refined together with their points. The rendered sparse scenario (16-25 points here) drifted in
   // orientation three times as fast with the adjustment as without (seed 4: 62 deg against 18 over 170 frames,
   // and 2 of 10 seeds came out mirrored). The textured scenarios and the real sequences have 60-140 and skip
   // it only in the odd frame (a turn's end, a fast jolt).
-  if (static_cast<int>(wp.pts.size()) < 6 * n_adjusted) return;
+  if (static_cast<int>(wp.pts.size()) < 6 * n_adjusted) return nullptr;
   std::vector<Pose> cams;
   for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
   geometry::BundleAdjustOptions bo;
@@ -234,9 +235,23 @@ void System::LocalBundleAdjust(int slot, FrameReport* r) {
     fixed_points.resize(wp.pts.size());
     for (size_t i = 0; i < wp.pts.size(); ++i) fixed_points[i] = loaded_points_.count(wp.pts[i]->id) > 0;
   }
-  geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo, fixed_points);
-  for (size_t w = first_adjusted; w < window.size(); ++w) map_.frames[window[w]].cam_from_world = cams[w];
-  r->removed += StoreAdjustedPoints(cams, wp, map_.frames[slot].index);
+  auto ba = std::make_unique<LocalBa>();
+  ba->slot = slot;
+  ba->window = std::move(window);
+  ba->first_adjusted = first_adjusted;
+  ba->wp = std::move(wp);
+  ba->cams = std::move(cams);
+  ba->fixed = std::move(fixed);
+  ba->fixed_points = std::move(fixed_points);
+  ba->options = bo;
+  ba->prepare_ms = Ms(t0);
+  return ba;
+}
+
+void System::ApplyLocalBa(const LocalBa& ba, FrameReport* r) {
+  for (size_t w = ba.first_adjusted; w < ba.window.size(); ++w) map_.frames[ba.window[w]].cam_from_world = ba.cams[w];
+  r->removed += StoreAdjustedPoints(ba.cams, ba.wp, map_.frames[ba.slot].index);
+  r->local_ba = true;
 }
 
 void System::AdjustPoints(int slot, FrameReport* r) {

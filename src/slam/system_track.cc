@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <future>
 #include <limits>
 #include <stdexcept>
 #include <unordered_map>
@@ -111,7 +112,18 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
         r.cam_from_world = fr.cam_from_world;  // the adjustment moved this keyframe too
       } else {
         AdjustPoints(slot, &r);
-        LocalBundleAdjust(slot, &r);
+        r.adjust_points_ms = Ms(t2);
+        const auto t3 = std::chrono::steady_clock::now();
+        if (std::unique_ptr<LocalBa> ba = PrepareLocalBa(slot); ba && options_.mapping.local_ba_async) {
+          // Solved while the caller goes on; the next Process (or Flush) applies it and revises this report.
+          LocalBa* solving = ba.get();
+          ba->solved = std::async(std::launch::async, [solving] { return solving->Solve(); });
+          pending_ba_ = std::move(ba);
+        } else if (ba) {
+          ba->Solve();
+          ApplyLocalBa(*ba, &r);
+        }
+        r.local_ba_ms = Ms(t3);
         r.cam_from_world = fr.cam_from_world;  // the local adjustment moves this keyframe too
       }
       r.adjust_ms = Ms(t2);
@@ -120,6 +132,7 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   MarkSeen(slot);
   ResidualStats(slot, &r);
   r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+  if (pending_ba_ && pending_ba_->slot == slot) pending_ba_->report = r;
   return r;
 }
 

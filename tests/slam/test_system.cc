@@ -325,6 +325,63 @@ TEST(System, SameSeedSameResult) {
   }
 }
 
+// MappingOptions::local_ba_async: the local bundle adjustment solved on its own thread and applied at the start of
+// the next Process gives the very poses, reports and map of the adjustment solved in place (nothing reads the map
+// between two calls here), and each keyframe's report comes back revised at the next call, first.
+TEST(System, TheLocalBundleAdjustmentOnItsOwnThreadChangesNothingButWhenItIsApplied) {
+  const apps::SequenceInput in = Scenario(120, 1.0, 0.1);
+  SystemOptions sync = FastOptions(), async = FastOptions();
+  sync.mapping.local_ba_async = false;
+  async.mapping.local_ba_async = true;
+  const auto a = RunSystem(in, sync, true), b = RunSystem(in, async, true);
+  ASSERT_EQ(a.reports.size(), b.reports.size());
+  int adjusted = 0;
+  for (size_t i = 0; i < a.reports.size(); ++i) {
+    const FrameReport &ra = a.reports[i], &rb = b.reports[i];
+    ASSERT_EQ(ra.index, rb.index);
+    ASSERT_EQ(ra.status, rb.status) << ra.index;
+    ASSERT_EQ(ra.has_pose, rb.has_pose) << ra.index;
+    EXPECT_EQ(ra.removed, rb.removed) << ra.index;
+    EXPECT_EQ(ra.map_points, rb.map_points) << ra.index;
+    EXPECT_EQ(ra.reproj_median_px, rb.reproj_median_px) << ra.index;
+    if (ra.has_pose) {
+      EXPECT_EQ(ra.cam_from_world.t, rb.cam_from_world.t) << ra.index;
+      EXPECT_EQ(ra.cam_from_world.q.coeffs(), rb.cam_from_world.q.coeffs()) << ra.index;
+    }
+    EXPECT_EQ(ra.local_ba, rb.local_ba) << ra.index;
+    adjusted += ra.local_ba;
+  }
+  // Not vacuous: the frames after the settling (which ends near frame 95 here) are keyframes with a local
+  // adjustment (measured: 25).
+  EXPECT_GE(adjusted, 15);
+  ASSERT_EQ(a.map.points.size(), b.map.points.size());
+  for (size_t i = 0; i < a.map.points.size(); ++i) EXPECT_EQ(a.map.points[i], b.map.points[i]) << i;
+
+  // Call by call: a keyframe's report is returned at once, and again, revised, first among the next call's.
+  System system(in.camera, async, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+  system.SetBaselineOracle(apps::BaselineOracle(in.groundtruth));
+  int revised = 0;
+  int64_t previous = -1;
+  for (const FrameObservations& f : in.frames) {
+    const std::vector<FrameReport> out = system.Process(f);
+    ASSERT_FALSE(out.empty());
+    EXPECT_TRUE(std::any_of(out.begin(), out.end(), [&](const FrameReport& r) { return r.index == f.index; }));
+    for (size_t i = 0; i < out.size(); ++i) {
+      if (!out[i].local_ba) continue;
+      EXPECT_EQ(i, 0u);  // first
+      EXPECT_EQ(out[i].index, previous);
+      ++revised;
+    }
+    previous = f.index;
+  }
+  const std::vector<FrameReport> tail = system.Flush();
+  ASSERT_EQ(tail.size(), 1u);  // the last frame is a keyframe with a local adjustment
+  EXPECT_EQ(tail.front().index, previous);
+  EXPECT_TRUE(tail.front().local_ba);
+  EXPECT_TRUE(system.Flush().empty());
+  EXPECT_EQ(revised + 1, adjusted);
+}
+
 // One seed: SystemOptions::seed drives the pose step too, whatever the tracker options' own seed says; a different
 // System seed gives other draws (the noisy scenario: some pose differs).
 TEST(System, OneSeedDrivesEveryDraw) {
