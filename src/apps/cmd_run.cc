@@ -166,10 +166,12 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   InstallInterruptHandler();
   bool announced = false;
   bool was_lost = false;
+  int64_t progress_logged = -1;  // a frame's report may come twice (revised by its local bundle adjustment)
   const SlamRunResult res = RunSlam(
       input, options, std::move(pose_kernel), std::move(point_kernel), a.gt_scale,
       [&](const slam::FrameReport& r) {
-        if (!r.initialisation && (r.index + 1) % 50 == 0) spdlog::info("frame {}/{}", r.index + 1, input.frames.size());
+        if (!r.initialisation && (r.index + 1) % 50 == 0 && r.index > progress_logged)
+          spdlog::info("frame {}/{}", r.index + 1, input.frames.size()), progress_logged = r.index;
         if (r.initialisation && !r.note.empty() && !announced) spdlog::info("{}", r.note), announced = true;
         // Log the changes of state, not every lost frame.
         const bool lost = r.status == slam::FrameStatus::kLost;

@@ -92,7 +92,15 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
     const Eigen::Quaterniond qi = cams[i].q.normalized();
     pose[i] = {qi.x(), qi.y(), qi.z(), qi.w(), cams[i].t.x(), cams[i].t.y(), cams[i].t.z()};
   }
-  ceres::Problem problem;
+  // One loss for every residual (it holds only its scale), owned here rather than one allocated for each; the
+  // problem's structure is built right by construction, so Ceres' per-block checks are skipped.
+  ceres::CauchyLoss cauchy(options.huber_px);
+  ceres::HuberLoss huber(options.huber_px);
+  ceres::LossFunction* loss = options.cauchy ? static_cast<ceres::LossFunction*>(&cauchy) : &huber;
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.disable_all_safety_checks = true;
+  ceres::Problem problem(problem_options);
   for (const BundleObservation& o : obs) {
     if (o.camera < 0 || o.camera >= static_cast<int>(cams.size()) || o.point < 0 || o.point >= static_cast<int>(pts.size()))
       throw std::invalid_argument("bundle adjustment: observation index out of range");
@@ -100,8 +108,6 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
       ++out.left_out_behind;
       continue;
     }
-    ceres::LossFunction* loss = options.cauchy ? static_cast<ceres::LossFunction*>(new ceres::CauchyLoss(options.huber_px))
-                                               : new ceres::HuberLoss(options.huber_px);
     if (fixed[static_cast<size_t>(o.camera)]) {
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FixedCameraReprojectionError, 2, 3>(
                                    new FixedCameraReprojectionError(cams[o.camera], o.uv_norm, options.focal_px)),
