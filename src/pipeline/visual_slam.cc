@@ -177,8 +177,8 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   for (int64_t id : fr.remapped_ids) lost_descriptors_.erase(id);
 
   // The last keyframe's local bundle adjustment (local_ba_async) was solved while the front end ran: applied
-  // before the map is matched or tracked against.
-  step.reports = system_.Flush();
+  // before the map is matched or tracked against (its revised report comes with the System's next reports).
+  system_.ApplyPendingAdjustment();
   step.before_init = !system_.initialised();
   FrameObservations obs = frontend::ToObservations(fr);
   // While the System tracks a provisional map (a bridge over the unmapped), every frame is also matched against
@@ -190,8 +190,7 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   }
   after_gap_ = false;
   const auto t_backend = Clock::now();
-  std::vector<slam::FrameReport> reports = system_.Process(obs);
-  step.reports.insert(step.reports.end(), std::make_move_iterator(reports.begin()), std::make_move_iterator(reports.end()));
+  step.reports = system_.Process(obs);
   step.backend_ms = MsSince(t_backend);
   KeepFirstLooks(obs);
   if (const slam::FrameReport* current = step.current()) {

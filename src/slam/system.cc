@@ -144,9 +144,8 @@ System::~System() {
   if (pending_ba_ && pending_ba_->solved.valid()) pending_ba_->solved.wait();  // its thread reads *pending_ba_
 }
 
-std::vector<FrameReport> System::Flush() {
-  std::vector<FrameReport> out;
-  if (!pending_ba_) return out;
+void System::ApplyPendingAdjustment() {
+  if (!pending_ba_) return;
   const std::unique_ptr<LocalBa> ba = std::move(pending_ba_);
   const auto t0 = std::chrono::steady_clock::now();
   const double solve_ms = ba->solved.get();  // rethrows what the solve threw
@@ -160,13 +159,25 @@ std::vector<FrameReport> System::Flush() {
   r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
   r.local_ba_ms = ba->prepare_ms + solve_ms + Ms(t1);
   r.adjust_ms = r.adjust_points_ms + r.local_ba_ms;
-  out.push_back(std::move(r));
+  held_reports_.push_back(std::move(r));
+}
+
+std::vector<FrameReport> System::Flush() {
+  ApplyPendingAdjustment();
+  std::vector<FrameReport> out = std::move(held_reports_);
+  held_reports_.clear();
   return out;
 }
 
 std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   std::vector<FrameReport> out = Flush();
-  std::vector<FrameReport> now = ProcessFrame(frame);
+  std::vector<FrameReport> now;
+  try {
+    now = ProcessFrame(frame);
+  } catch (...) {
+    held_reports_ = std::move(out);  // applied to the map already: the next Flush returns them
+    throw;
+  }
   out.insert(out.end(), std::make_move_iterator(now.begin()), std::make_move_iterator(now.end()));
   return out;
 }

@@ -270,9 +270,12 @@ class System {
   // could be placed (their reports replace the earlier 'waiting' ones).
   std::vector<FrameReport> Process(const FrameObservations& frame);
   // MappingOptions::local_ba_async: waits for the last keyframe's local bundle adjustment, applies it and returns
-  // that keyframe's revised report (none when nothing is pending). Process does it first; call it after the last
-  // frame, before reading the final map.
+  // that keyframe's revised report (none when nothing is pending; also those a Process that threw had flushed).
+  // Process does it first; call it after the last frame, before reading the final map.
   std::vector<FrameReport> Flush();
+  // The same wait and application, the revised report held for the next Process or Flush to return: for a caller
+  // that reads the map (relocalisation) before it processes the frame.
+  void ApplyPendingAdjustment();
 
   // After the track is lost: the pose of a frame from features matched to map points by their look alone
   // (no pose prior), by RANSAC PnP on the points that are in the map. nullopt when fewer than
@@ -440,6 +443,7 @@ class System {
   std::unordered_set<int64_t> loaded_points_;
   // MappingOptions::local_ba_async: the adjustment being solved, and the report of its keyframe.
   std::unique_ptr<LocalBa> pending_ba_;
+  std::vector<FrameReport> held_reports_;  // revised, not yet returned (ApplyPendingAdjustment, a Process that threw)
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last pure-rotation frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);

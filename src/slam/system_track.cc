@@ -8,6 +8,7 @@
 #include <future>
 #include <limits>
 #include <stdexcept>
+#include <system_error>
 #include <unordered_map>
 
 #include <Eigen/Dense>
@@ -114,12 +115,17 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
         AdjustPoints(slot, &r);
         r.adjust_points_ms = Ms(t2);
         const auto t3 = std::chrono::steady_clock::now();
-        if (std::unique_ptr<LocalBa> ba = PrepareLocalBa(slot); ba && options_.mapping.local_ba_async) {
+        std::unique_ptr<LocalBa> ba = PrepareLocalBa(slot);
+        if (ba && options_.mapping.local_ba_async) {
           // Solved while the caller goes on; the next Process (or Flush) applies it and revises this report.
           LocalBa* solving = ba.get();
-          ba->solved = std::async(std::launch::async, [solving] { return solving->Solve(); });
-          pending_ba_ = std::move(ba);
-        } else if (ba) {
+          try {
+            ba->solved = std::async(std::launch::async, [solving] { return solving->Solve(); });
+            pending_ba_ = std::move(ba);
+          } catch (const std::system_error&) {  // no thread to be had: solved in place below
+          }
+        }
+        if (ba) {
           ba->Solve();
           ApplyLocalBa(*ba, &r);
         }
