@@ -22,17 +22,17 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   SlamRunResult res;
   ReportLog log;
   const RunClock clock;
-  for (const FrameObservations& f : input.frames) {
-    if (stop && stop()) break;
-    for (const slam::FrameReport& r : system.Process(f)) {
+  auto put = [&](const std::vector<slam::FrameReport>& reports) {
+    for (const slam::FrameReport& r : reports) {
       log.Put(r);
       if (on_frame) on_frame(r);
     }
+  };
+  for (const FrameObservations& f : input.frames) {
+    if (stop && stop()) break;
+    put(system.Process(f));
   }
-  for (const slam::FrameReport& r : system.Flush()) {  // MappingOptions::local_ba_async: the last keyframe's
-    log.Put(r);
-    if (on_frame) on_frame(r);
-  }
+  put(system.Flush());  // MappingOptions::local_ba_async: the last keyframe's revised report
   res.reports = std::move(log.reports);
   res.times = clock.Elapsed();
   res.initialised = system.initialised();

@@ -28,6 +28,16 @@ double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& po
 
 namespace {
 
+// The pixel residual of a point p in camera coordinates seen at normalised (u, v); false behind the camera (for
+// a step that puts it there: Ceres rejects the step).
+template <typename T>
+bool PixelResidual(const T* p, double u, double v, double f, T* r) {
+  if (!(p[2] > T(1e-9))) return false;
+  r[0] = T(f) * (p[0] / p[2] - T(u));
+  r[1] = T(f) * (p[1] / p[2] - T(v));
+  return true;
+}
+
 // Reprojection residual in pixels of a camera's pose block: its rotation as a quaternion stored (x, y, z, w) as
 // Eigen does, then its translation. One block a camera, not two: the Schur complement then has a quarter of the
 // camera-camera cells (Ceres locks each cell it updates).
@@ -39,10 +49,7 @@ struct ReprojectionError {
     T p[3];
     ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
     p[0] += pose[4], p[1] += pose[5], p[2] += pose[6];
-    if (!(p[2] > T(1e-9))) return false;  // a step that puts it behind the camera: Ceres rejects the step
-    r[0] = T(f) * (p[0] / p[2] - T(u));
-    r[1] = T(f) * (p[1] / p[2] - T(v));
-    return true;
+    return PixelResidual(p, u, v, f, r);
   }
   double u, v, f;
 };
@@ -56,10 +63,7 @@ struct FixedCameraReprojectionError {
   bool operator()(const T* X, T* r) const {
     T p[3];
     for (int i = 0; i < 3; ++i) p[i] = T(R(i, 0)) * X[0] + T(R(i, 1)) * X[1] + T(R(i, 2)) * X[2] + T(t[i]);
-    if (!(p[2] > T(1e-9))) return false;
-    r[0] = T(f) * (p[0] / p[2] - T(u));
-    r[1] = T(f) * (p[1] / p[2] - T(v));
-    return true;
+    return PixelResidual(p, u, v, f, r);
   }
   Eigen::Matrix3d R;
   Eigen::Vector3d t;

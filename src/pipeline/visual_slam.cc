@@ -57,13 +57,7 @@ void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
         first_descriptors_.emplace(f.feature_id, *d);
 }
 
-std::vector<slam::FrameReport> VisualSlam::Finish() {
-  std::vector<slam::FrameReport> reports = system_.Flush();
-  if (const auto it = std::find_if(reports.rbegin(), reports.rend(), [](const slam::FrameReport& r) { return r.has_pose; });
-      it != reports.rend())
-    latest_cam_from_world_ = it->cam_from_world;
-  return reports;
-}
+std::vector<slam::FrameReport> VisualSlam::Finish() { return system_.Flush(); }
 
 io::MapFile VisualSlam::ExportMap() {
   system_.Flush();  // nothing is pending after Finish; a caller that did not call it loses only the report

@@ -10,6 +10,7 @@
 #include <limits>
 #include <stdexcept>
 #include <unordered_map>
+#include <utility>
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
@@ -164,9 +165,7 @@ void System::ApplyPendingAdjustment() {
 
 std::vector<FrameReport> System::Flush() {
   ApplyPendingAdjustment();
-  std::vector<FrameReport> out = std::move(held_reports_);
-  held_reports_.clear();
-  return out;
+  return std::exchange(held_reports_, {});
 }
 
 std::vector<FrameReport> System::Process(const FrameObservations& frame) {
@@ -178,6 +177,11 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     held_reports_ = std::move(out);  // applied to the map already: the next Flush returns them
     throw;
   }
+  // An adjustment this frame started completes the frame's report as ProcessFrame returns it (with what the
+  // paths after TrackFrame added, e.g. a relocalisation's note).
+  if (pending_ba_)
+    for (const FrameReport& r : now)
+      if (r.index == frame.index) pending_ba_->report = r;
   out.insert(out.end(), std::make_move_iterator(now.begin()), std::make_move_iterator(now.end()));
   return out;
 }

@@ -171,7 +171,6 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
     bridge_.reset();
     std::vector<FrameReport> out{TrackFrame(slot, cam_from_world)};
     out.front().note += "; relocalised in the map after the provisional map was lost";
-    if (pending_ba_ && pending_ba_->slot == slot) pending_ba_->report.note = out.front().note;  // its revision too
     return out;
   }
   const FrameRecord& anchor = map_.frames[bridge_->anchor_slot];

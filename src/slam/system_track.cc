@@ -138,7 +138,6 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   MarkSeen(slot);
   ResidualStats(slot, &r);
   r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
-  if (pending_ba_ && pending_ba_->slot == slot) pending_ba_->report = r;
   return r;
 }
 
