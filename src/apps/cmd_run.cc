@@ -437,6 +437,11 @@ void RegisterRun(CLI::App& app) {
                   "back end)")
       ->check(CLI::Range(0, 64))
       ->capture_default_str();
+  cmd->add_option("--local-ba-min-step", args->system.mapping.local_ba_min_step_of_depth,
+                  "The local bundle adjustment's keyframes at least this fraction of the scene's median depth apart "
+                  "(0: the newest keyframes, consecutive)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--local-ba-async", args->system.mapping.local_ba_async,
                   "Solve each keyframe's local bundle adjustment on its own thread while the next frame is read and "
                   "its features tracked; applied before that frame's pose step (false: in place, the next frame "

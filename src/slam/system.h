@@ -136,6 +136,13 @@ struct MappingOptions {
   // would follow, weighs little.
   double local_ba_loss_sigmas = 2.385;
   double local_ba_min_loss_px = 0.3;
+  // Its keyframes, adjusted and held, are taken walking back from the newest one, each at least this fraction of
+  // the newest keyframe's median depth from the one taken before it (a keyframe nearer is left out): the window
+  // then spans a baseline that fixes depths whatever the frame rate and speed. Every posed frame is a keyframe
+  // here, and a hand-held camera at 30 Hz moves ~0.5 % of the depth a frame: eight consecutive ones made a window
+  // of 4 % that let 7-Scenes' scale drift (ATE 7.0 cm; 5.0 cm with 0.02, seeds 1-2). A car at 1 m a frame is
+  // already further apart than this: its windows are unchanged. 0: the newest keyframes, consecutive.
+  double local_ba_min_step_of_depth = 0.02;
   // The local bundle adjustment of a keyframe solved on a thread of its own while the caller goes on to the next
   // frame (reads it, runs its front end), and applied at the start of the next System::Process (or Flush): the
   // next frame's pose step and mapping see the adjusted map as they would without it, so a folder of
@@ -242,6 +249,7 @@ struct FrameReport {
   // application, and local_ba_wait_ms what the next frame's Process waited for the solve to end).
   double adjust_points_ms = 0, local_ba_ms = 0, local_ba_wait_ms = 0;
   bool local_ba = false;  // a local bundle adjustment refined this keyframe's window (not skipped)
+  int local_ba_span = 0;  // frames from the oldest keyframe it adjusted to this one (local_ba_min_step_of_depth)
   std::string note;             // why lost / waiting; how posed when not by the pose step
   bool rotation_only = false;   // tracked by its rotation about the last centre (SystemOptions::rotation_only)
   bool provisional = false;     // posed in a provisional map whose scale was guessed (SystemOptions::bridge)
@@ -457,6 +465,9 @@ class System {
   // the anchor and the map's points fixed. Returns how many keyframes were adjusted (0: too few points).
   int AdjustJoinedBridge(int slot, FrameReport* r);
   void AbandonBridge(int64_t frame_index);
+  // The upper median depth of the map points that frame `slot` sees (in front of it), at its pose; none when it
+  // sees none.
+  std::optional<double> MedianDepthSeenBy(int slot) const;
 };
 
 }  // namespace mcslam::slam

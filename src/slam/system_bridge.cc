@@ -48,18 +48,13 @@ bool System::StartBridge(int slot) {
   }
   // The map's depth before the turn: the median depth of the map points that the latest frame posed by the pose
   // step saw.
-  std::vector<double> depths;
-  for (int s = anchor; s >= 0 && depths.empty(); --s) {
-    const FrameRecord& f = map_.frames[s];
-    if (!f.has_pose || f.pose_inliers <= 0) continue;
-    for (const FeatureUndistorted& o : f.features)
-      if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
-        if (const double z = (f.cam_from_world * p->position_in_world).z(); z > 0) depths.push_back(z);
-  }
-  if (depths.empty()) return false;
+  std::optional<double> depth;
+  for (int s = anchor; s >= 0 && !depth; --s)
+    if (map_.frames[s].has_pose && map_.frames[s].pose_inliers > 0) depth = MedianDepthSeenBy(s);
+  if (!depth) return false;
   bridge_.emplace();
   bridge_->anchor_slot = anchor;
-  bridge_->depth_prior = UpperMedian(depths);
+  bridge_->depth_prior = *depth;
   return true;
 }
 

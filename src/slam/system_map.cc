@@ -178,16 +178,34 @@ void System::BundleAdjustWindow(int slot, FrameReport* r) {
   r->adjusted += static_cast<int>(wp.pts.size()) - removed;
 }
 
+std::optional<double> System::MedianDepthSeenBy(int slot) const {
+  const FrameRecord& f = map_.frames[slot];
+  std::vector<double> depths;
+  for (const FeatureUndistorted& o : f.features)
+    if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
+      if (const double z = (f.cam_from_world * p->position_in_world).z(); z > 0) depths.push_back(z);
+  if (depths.empty()) return std::nullopt;
+  return UpperMedian(depths);
+}
+
 std::unique_ptr<System::LocalBa> System::PrepareLocalBa(int slot) {
   const auto t0 = std::chrono::steady_clock::now();
   const MappingOptions& mo = options_.mapping;
   if (mo.local_ba_keyframes == 0 || settling_ || bridging()) return nullptr;
-  // Posed keyframes whose features are kept, newest first: the first local_ba_keyframes are adjusted.
+  // Posed keyframes whose features are kept, newest first, each at least local_ba_min_step_of_depth of the
+  // newest one's median depth from the one taken before it: the first local_ba_keyframes are adjusted.
+  const double min_step = mo.local_ba_min_step_of_depth * MedianDepthSeenBy(slot).value_or(0.0);
   std::vector<int> recent;
+  Eigen::Vector3d last_centre = Eigen::Vector3d::Zero();
   for (auto it = map_.keyframes.rbegin(); it != map_.keyframes.rend() && *it >= pruned_until_ &&
                                           static_cast<int>(recent.size()) < 3 * mo.local_ba_keyframes;
-       ++it)
-    if (map_.frames[*it].has_pose) recent.push_back(*it);
+       ++it) {
+    if (!map_.frames[*it].has_pose) continue;
+    const Eigen::Vector3d centre = map_.frames[*it].cam_from_world.OriginOfTargetInSource();
+    if (!recent.empty() && (centre - last_centre).norm() < min_step) continue;
+    recent.push_back(*it);
+    last_centre = centre;
+  }
   const int n_adjusted = std::min<int>(mo.local_ba_keyframes, static_cast<int>(recent.size()));
   if (n_adjusted < 3) return nullptr;
   // Held fixed: the next twice as many keyframes (they see most of the same points: the gauge and the scale
@@ -239,6 +257,7 @@ std::unique_ptr<System::LocalBa> System::PrepareLocalBa(int slot) {
   ba->slot = slot;
   ba->window = std::move(window);
   ba->first_adjusted = first_adjusted;
+  ba->span = static_cast<int>(map_.frames[slot].index - map_.frames[ba->window[first_adjusted]].index);
   ba->wp = std::move(wp);
   ba->cams = std::move(cams);
   ba->fixed = std::move(fixed);
@@ -252,6 +271,7 @@ void System::ApplyLocalBa(const LocalBa& ba, FrameReport* r) {
   for (size_t w = ba.first_adjusted; w < ba.window.size(); ++w) map_.frames[ba.window[w]].cam_from_world = ba.cams[w];
   r->removed += StoreAdjustedPoints(ba.cams, ba.wp, map_.frames[ba.slot].index);
   r->local_ba = true;
+  r->local_ba_span = ba.span;
 }
 
 void System::AdjustPoints(int slot, FrameReport* r) {

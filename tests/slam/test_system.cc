@@ -325,6 +325,41 @@ TEST(System, SameSeedSameResult) {
   }
 }
 
+// MappingOptions::local_ba_min_step_of_depth: the local adjustment's keyframes are spaced by what the camera
+// moved against the scene's depth, not by their count. The paper scenario (hand-held, 30 Hz, ~2 cm a frame at
+// ~3 m) gets windows that reach further back than eight consecutive keyframes; the forward one (10 Hz, 1 m a frame
+// at tens of metres) keeps its consecutive ones; with the step 0 both are consecutive.
+TEST(System, TheLocalAdjustmentSpacesItsKeyframesByTheMoveAgainstTheDepth) {
+  auto median_span = [](const std::string& scenario, double step) {
+    sim::ScenarioOptions so;
+    so.name = scenario;
+    so.noise_px = 0.5;
+    so.seed = 1;
+    so.frames = 100;
+    const apps::SequenceInput in = apps::KnownMapInputFromSequence(sim::MakeScenario(so));
+    SystemOptions o = FastOptions();
+    o.mapping.local_ba_min_step_of_depth = step;
+    const apps::SlamRunResult res = RunSystem(in, o, /*gt_scale=*/false);
+    std::vector<int> spans, consecutive;
+    for (const FrameReport& r : res.reports)
+      if (r.local_ba) spans.push_back(r.local_ba_span);
+    if (spans.empty()) return -1;
+    std::nth_element(spans.begin(), spans.begin() + static_cast<long>(spans.size() / 2), spans.end());
+    return spans[spans.size() / 2];
+  };
+  const int adjusted = SystemOptions().mapping.local_ba_keyframes;
+  const int paper = median_span("paper", SystemOptions().mapping.local_ba_min_step_of_depth);
+  const int paper_consecutive = median_span("paper", 0.0);
+  const int forward = median_span("forward", SystemOptions().mapping.local_ba_min_step_of_depth);
+  std::printf("[ span ] median frames spanned by the adjusted keyframes: paper %d (step 0: %d), forward %d\n", paper,
+              paper_consecutive, forward);
+  // Every tracked frame is a keyframe on these inputs: eight consecutive ones span 7 frames.
+  EXPECT_EQ(paper_consecutive, adjusted - 1);
+  EXPECT_EQ(forward, adjusted - 1);
+  // 2 % of ~3 m is ~6 cm, three frames of the paper's path or so: at least twice the consecutive span.
+  EXPECT_GE(paper, 2 * (adjusted - 1));
+}
+
 // MappingOptions::local_ba_async: the local bundle adjustment solved on its own thread and applied at the start of
 // the next Process gives the very poses, reports and map of the adjustment solved in place (nothing reads the map
 // between two calls here), and each keyframe's report comes back revised at the next call, first.
@@ -628,6 +663,16 @@ TEST(SystemOptions, CheckNamesTheField) {
   o = {};
   o.init.min_inliers = 3;
   EXPECT_THROW(o.Check(), std::invalid_argument);
+  for (const double bad : {-0.01, 1.5, std::nan("")}) {
+    o = {};
+    o.mapping.local_ba_min_step_of_depth = bad;
+    try {
+      o.Check();
+      ADD_FAILURE() << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("local_ba_min_step_of_depth"), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace
