@@ -140,7 +140,7 @@ struct MappingOptions {
   // the newest keyframe's median depth from the one taken before it (a keyframe nearer is left out): the window
   // then spans a baseline that fixes depths whatever the frame rate and speed. Every posed frame is a keyframe
   // here, and a hand-held camera at 30 Hz moves ~0.5 % of the depth a frame: eight consecutive ones made a window
-  // of 4 % that let 7-Scenes' scale drift (ATE 7.0 cm; 5.0 cm with 0.02, seeds 1-2). A car at 1 m a frame is
+  // of 4 % that let 7-Scenes' scale drift (ATE 6.9-7.2 cm; 4.9-5.3 cm with 0.02, seeds 1-10). A car at 1 m a frame is
   // already further apart than this: its windows are unchanged. 0: the newest keyframes, consecutive.
   double local_ba_min_step_of_depth = 0.02;
   // The local bundle adjustment of a keyframe solved on a thread of its own while the caller goes on to the next

@@ -40,7 +40,6 @@ struct System::LocalBa {
   int slot = -1;
   std::vector<int> window;    // frame slots, oldest first
   size_t first_adjusted = 0;  // window[first_adjusted..] are adjusted, those before fixed
-  int span = 0;               // frames from the oldest adjusted keyframe to the newest (FrameReport::local_ba_span)
   WindowPoints wp;            // wp.X and the poses below are what the solve changes
   std::vector<Pose> cams;
   std::vector<bool> fixed, fixed_points;

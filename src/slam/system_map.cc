@@ -257,7 +257,6 @@ std::unique_ptr<System::LocalBa> System::PrepareLocalBa(int slot) {
   ba->slot = slot;
   ba->window = std::move(window);
   ba->first_adjusted = first_adjusted;
-  ba->span = static_cast<int>(map_.frames[slot].index - map_.frames[ba->window[first_adjusted]].index);
   ba->wp = std::move(wp);
   ba->cams = std::move(cams);
   ba->fixed = std::move(fixed);
@@ -271,7 +270,7 @@ void System::ApplyLocalBa(const LocalBa& ba, FrameReport* r) {
   for (size_t w = ba.first_adjusted; w < ba.window.size(); ++w) map_.frames[ba.window[w]].cam_from_world = ba.cams[w];
   r->removed += StoreAdjustedPoints(ba.cams, ba.wp, map_.frames[ba.slot].index);
   r->local_ba = true;
-  r->local_ba_span = ba.span;
+  r->local_ba_span = static_cast<int>(map_.frames[ba.slot].index - map_.frames[ba.window[ba.first_adjusted]].index);
 }
 
 void System::AdjustPoints(int slot, FrameReport* r) {

@@ -340,7 +340,7 @@ TEST(System, TheLocalAdjustmentSpacesItsKeyframesByTheMoveAgainstTheDepth) {
     SystemOptions o = FastOptions();
     o.mapping.local_ba_min_step_of_depth = step;
     const apps::SlamRunResult res = RunSystem(in, o, /*gt_scale=*/false);
-    std::vector<int> spans, consecutive;
+    std::vector<int> spans;
     for (const FrameReport& r : res.reports)
       if (r.local_ba) spans.push_back(r.local_ba_span);
     if (spans.empty()) return -1;
