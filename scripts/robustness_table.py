@@ -61,6 +61,12 @@ def cell_row(name, seed, gt_path, run, code):
     r["path"] = path_len
     r["mirrored"] = bool(gt.get("mirrored", False))
     r["rel"] = ate / path_len if ate is not None and path_len else None
+    # The lens' k1 measured when the first map settled (report.json's self_calibration): kept or taken.
+    cal = j.get("self_calibration")
+    r["cal"] = None if not cal else "%s %.3f, %.1f sigma, %.1f px" % (
+        "**taken**" if cal.get("accepted") else "kept", cal.get("k1_measured", 0), cal.get("z", 0),
+        cal.get("corner_shift_px", 0))
+    r["cal_taken"] = bool(cal and cal.get("accepted"))
     why = []
     if init is None:
         why.append("never initialised")
@@ -158,16 +164,22 @@ def main():
             fmt(100 * statistics.median(tra) if tra else None, ".1f") + (" %" if tra else ""),
             ("%.2f %%, %.2f %%" % (100 * statistics.median(rels), 100 * max(rels))) if rels else "-",
             fmt(statistics.median(rots) if rots else None, ".2f")))
+    taken = [r for r in rows if r.get("cal_taken")]
+    out.append("\nThe lens' first radial distortion coefficient, measured when the first map settles "
+               "([self_calibration.md](self_calibration.md)), was taken in %d of %d cells%s; the others kept the "
+               "given camera (the rendered scenarios' cameras are exact).\n" % (
+                   len(taken), total,
+                   (" (" + ", ".join("%s seed %d" % (r["name"], r["seed"]) for r in taken) + ")") if taken else ""))
     out.append("\n## Every cell\n")
-    out.append("| scenario | seed | frames | initialised at | tracked | tracked after init | ATE m | path m | ATE / path | rotation deg | rejected inits | mirrored | ok | why not |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    out.append("| scenario | seed | frames | initialised at | tracked | tracked after init | ATE m | path m | ATE / path | rotation deg | rejected inits | mirrored | lens k1 (self-calibration) | ok | why not |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        out.append("| %s | %d | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+        out.append("| %s | %d | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
             r["name"], r["seed"], r.get("frames", "-"), fmt(r.get("init"), "d"), r.get("tracked", "-"),
             fmt(r.get("tracked_after"), "d"), fmt(r.get("ate"), ".4f"), fmt(r.get("path"), ".2f"),
             fmt(100 * r["rel"] if r.get("rel") is not None else None, ".2f") + (" %" if r.get("rel") is not None else ""),
             fmt(r.get("rot"), ".2f"), r.get("rejections", "-"), "yes" if r.get("mirrored") else "no",
-            "yes" if r["ok"] else "no", r.get("why", "")))
+            r.get("cal") or "-", "yes" if r["ok"] else "no", r.get("why", "")))
     os.makedirs(os.path.dirname(doc) or ".", exist_ok=True)
     with open(doc, "w") as f:
         f.write("\n".join(out) + "\n")

@@ -24,6 +24,7 @@
 #include "apps/options.h"
 #include "apps/run_timing.h"
 #include "apps/slam_job.h"
+#include "io/camera_io.h"
 #include "io/ply.h"
 #include "eval/trajectory_eval.h"
 
@@ -173,6 +174,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
         if (!r.initialisation && (r.index + 1) % 50 == 0 && r.index > progress_logged)
           spdlog::info("frame {}/{}", r.index + 1, input.frames.size()), progress_logged = r.index;
         if (r.initialisation && !r.note.empty() && !announced) spdlog::info("{}", r.note), announced = true;
+        if (r.self_calibration) spdlog::info("frame {}: {}", r.index, r.note);
         // Log the changes of state, not every lost frame.
         const bool lost = r.status == slam::FrameStatus::kLost;
         if (lost && !was_lost) spdlog::warn("frame {} lost: {}", r.index, r.note);
@@ -187,6 +189,8 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   io::WriteTum((out / "trajectory.txt").string(), traj);
   io::WriteTum((out / "trajectory_smoothed.txt").string(), ReportsToTrajectory(res.reports, true));
   io::WritePly((out / "map.ply").string(), res.map);
+  if (res.self_calibration.accepted)  // the camera the map was made with, for the next run
+    io::WriteCameraYaml((out / "camera_selfcalibrated.yaml").string(), res.self_calibration_camera);
   std::optional<eval::TrajectoryErrors> err;
   if (!input.groundtruth.empty() && traj.size() >= 3) {
     try {
@@ -232,6 +236,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
     if (r.initialisation && !r.note.empty() && j["initialisation"].is_null())
       j["initialisation"] = {{"frame", r.index}, {"note", r.note}};
   }
+  j["self_calibration"] = SelfCalibrationJson(res.self_calibration);
   j["interrupted"] = Interrupted();
   j["frame_ms_median"] = UpperMedian(ms);
   j["fps"] = fps;
@@ -404,6 +409,9 @@ void RegisterRun(CLI::App& app) {
   cmd->add_flag("--no-pose-before-reference{false}", args->system.init.pose_frames_before_reference,
                 "Leave the frames before the initialisation's reference frame (when it moved on while waiting) "
                 "without a pose instead of placing them against the first map");
+  cmd->add_flag("--no-self-calibration{false}", args->system.init.self_calibrate,
+                "Keep the camera's distortion as given instead of refining its first radial coefficient from the "
+                "settled first map when the map measures it clearly (docs/self_calibration.md)");
   cmd->add_option("--samples", args->system.mapping.samples, "Monte Carlo samples per adjusted point")
       ->check(CLI::Range(1, 1 << 22))
       ->capture_default_str();

@@ -23,6 +23,7 @@
 #include "apps/viewer.h"
 #include "core/median.h"
 #include "eval/trajectory_eval.h"
+#include "io/camera_io.h"
 #include "io/datasets.h"
 #include "io/ply.h"
 #include "io/trajectory_io.h"
@@ -285,6 +286,7 @@ void ImageRun::RunFrames() {
       tracked += r.status == slam::FrameStatus::kTracked;
       lost += r.status == slam::FrameStatus::kLost;
       if (r.init_rejected) init_rejections.push_back({{"frame", r.index}, {"why", r.note}});
+      if (r.self_calibration) progress.Clear(), spdlog::info("frame {}: {}", r.index, r.note);
       if (r.initialisation && !r.note.empty() && !init_frame) {
         init_frame = r.index;
         init_note = r.note;
@@ -371,6 +373,7 @@ void ImageRun::RunFrames() {
             if (p.state != slam::PointState::kRemoved) pts.push_back(p.position_in_world);
           overlay->Anchor(pts);
         }
+        overlay->SetCamera(vslam->system().camera());
         overlay->Write(frame.image, fr, vslam->system().map(), current);
       }
       row.frame_ms = MsSince(t_frame);
@@ -418,6 +421,13 @@ void ImageRun::CheckEnd() {
 void ImageRun::WriteOutputs() {
   WriteTrajectoryMapAndFrames();
   WriteMap();
+  if (vslam->system().self_calibration().accepted) {  // the camera the map was made with, for the next run
+    try {
+      io::WriteCameraYaml((out / "camera_selfcalibrated.yaml").string(), vslam->system().camera());
+    } catch (const std::exception& e) {
+      if (failure.empty()) failure = e.what();
+    }
+  }
   if (options.viewer) {  // before the report, so that the report carries its failure
     ViewerOptions vo;
     vo.ground_truth = gt;

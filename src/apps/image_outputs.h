@@ -89,6 +89,8 @@ class Overlay {
       corners_[i] = centre + half * Eigen::Vector3d(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);
     anchored_ = true;
   }
+  // The camera the cube is drawn with: the map's (its k1 may be self-calibrated during the run).
+  void SetCamera(const PinholeCamera& camera) { camera_ = camera; }
   void Write(const cv::Mat& image, const frontend::FrameResult& fe, const slam::Map& map,
              const slam::FrameReport* report) {
     cv::Mat canvas;

@@ -58,6 +58,14 @@ std::string StageTable(const std::vector<std::pair<std::string, Stage>>& stages,
   return out + "\n";
 }
 
+nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c) {
+  if (!c.tried) return nullptr;
+  return {{"accepted", c.accepted},         {"frame", c.frame},     {"k1_given", c.k1_given},
+          {"k1_measured", c.k1_measured},   {"sigma_k1", c.sigma_k1}, {"z", c.z},
+          {"corner_shift_px", c.corner_shift_px}, {"frames", c.frames}, {"points", c.points},
+          {"observations", c.observations}, {"note", c.note}};
+}
+
 nlohmann::json StatsJson(const eval::ErrorStats& s) {
   auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return {{"count", s.count}, {"rmse", num(s.rmse)}, {"mean", num(s.mean)}, {"median", num(s.median)}, {"max", num(s.max)}};
@@ -264,6 +272,7 @@ void ImageRun::WriteReport() {
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);
   j["initialisation_rejections"] = init_rejections;
+  j["self_calibration"] = SelfCalibrationJson(vslam->system().self_calibration());
   j["interrupted"] = interrupted;
   AddRunTimes(times, &j);
   j["fps"] = sum.fps;

@@ -46,6 +46,9 @@ struct Stage {
 // {"count", "median_ms", "mean_ms", "p90_ms", "p99_ms", "max_ms"} of a stage (only the count, and null median
 // and mean, when it never ran).
 nlohmann::json StageJson(const Stage& s);
+// report.json's "self_calibration": what the System measured of the lens' k1 and whether it took it (null when
+// it never tried: no settled map, or off).
+nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c);
 // The table `run --timings` prints: per stage the frames it ran on, its median, 90th and 99th percentile and
 // largest time; then the throughput (frames over the wall time), the latency of a frame (frame_total: read,
 // front end, relocalisation and back end, one after the other) and the front end's median over the pose

@@ -36,6 +36,8 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   res.reports = std::move(log.reports);
   res.times = clock.Elapsed();
   res.initialised = system.initialised();
+  res.self_calibration = system.self_calibration();
+  res.self_calibration_camera = system.camera();
   for (const slam::MapPoint& p : system.map().points()) {
     if (p.state == slam::PointState::kRemoved) continue;
     res.map.points.push_back(p.position_in_world);

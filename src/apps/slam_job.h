@@ -27,6 +27,8 @@ struct ReportLog {
 struct SlamRunResult {
   std::vector<slam::FrameReport> reports;  // one per frame, in order (the final report of each)
   bool initialised = false;
+  slam::SelfCalibration self_calibration;  // what the System measured of the lens' k1
+  PinholeCamera self_calibration_camera;   // the camera the map was made with
   io::PointCloud map;                       // active and lost points, with ids
   RunTimes times;                           // wall and process CPU time of the frames' processing
 };

@@ -44,7 +44,7 @@ const slam::FrameReport* VisualSlamStep::current() const {
 VisualSlam::VisualSlam(const PinholeCamera& camera, VisualSlamOptions options,
                        std::unique_ptr<compute::PoseKernel> pose_kernel,
                        std::unique_ptr<compute::PointKernel> point_kernel)
-    : camera_(camera),
+    : given_camera_(camera),
       options_((options.Check(), std::move(options))),
       frontend_(options_.frontend),
       system_(camera, options_.system, std::move(pose_kernel), std::move(point_kernel)) {}
@@ -62,7 +62,7 @@ std::vector<slam::FrameReport> VisualSlam::Finish() { return system_.Flush(); }
 io::MapFile VisualSlam::ExportMap() {
   system_.Flush();  // nothing is pending after Finish; a caller that did not call it loses only the report
   io::MapFile out;
-  out.camera = camera_;
+  out.camera = system_.camera();  // with its k1 self-calibrated, if it was
   for (const slam::MapPoint& p : system_.map().points()) {
     if (p.state == slam::PointState::kRemoved) continue;
     io::MapFilePoint mp;
@@ -94,7 +94,10 @@ io::MapFile VisualSlam::ExportMap() {
 
 void VisualSlam::LoadMap(const io::MapFile& map) {
   if (!system_.map().frames.empty()) throw std::logic_error("VisualSlam::LoadMap: only before the first frame");
-  if (const std::string diff = io::CameraDifference(map.camera, camera_); !diff.empty())
+  // A map made by a run that self-calibrated its lens' k1 (InitOptions::self_calibrate) goes on with its k1.
+  PinholeCamera given_k1 = map.camera;
+  given_k1.dist.k1 = given_camera_.dist.k1;
+  if (const std::string diff = io::CameraDifference(given_k1, given_camera_); !diff.empty())
     throw std::invalid_argument(fmt::format("the map was made with another camera than this run's ({})", diff));
   if (!options_.relocalise)
     throw std::invalid_argument("a run in a loaded map starts by relocalising in it: relocalisation cannot be off");
@@ -126,7 +129,7 @@ void VisualSlam::LoadMap(const io::MapFile& map) {
     }
     keyframes.push_back(std::move(f));
   }
-  system_.StartInMap(std::move(points), std::move(keyframes));
+  system_.StartInMap(std::move(points), std::move(keyframes), map.camera);
   frontend_.ReserveIdsBelow(next_id);
   was_lost_ = true;  // the first frame is relocalised
 }
@@ -148,8 +151,8 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
   for (const auto& [seen, p] : lost_points) {
     if (requests.size() >= static_cast<size_t>(options_.max_remap_requests)) break;
     Eigen::Vector2d uv;
-    if (!camera_.ProjectWorld(*latest_cam_from_world_, p->position_in_world, &uv) ||
-        !camera_.InImage(uv, options_.frontend.border_px))
+    if (!system_.camera().ProjectWorld(*latest_cam_from_world_, p->position_in_world, &uv) ||
+        !system_.camera().InImage(uv, options_.frontend.border_px))
       continue;
     requests.push_back({p->id, lost_descriptors_.at(p->id), uv});
   }

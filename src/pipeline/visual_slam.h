@@ -105,7 +105,7 @@ class VisualSlam {
   // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
   void KeepFirstLooks(const FrameObservations& obs);
 
-  PinholeCamera camera_;
+  PinholeCamera given_camera_;  // as given (the System's may have its k1 self-calibrated)
   VisualSlamOptions options_;
   frontend::Frontend frontend_;
   slam::System system_;

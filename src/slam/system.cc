@@ -74,6 +74,9 @@ void InitOptions::Check() const {
     Fail(fmt::format("init: settle_parallax_deg must be in [0, 90), got {}", settle_parallax_deg));
   if (settle_max_frames < 3) Fail(fmt::format("init: settle_max_frames must be >= 3, got {}", settle_max_frames));
   if (!(settle_step > 1)) Fail(fmt::format("init: settle_step must be > 1, got {}", settle_step));
+  if (!(calibration_min_z > 0)) Fail(fmt::format("init: calibration_min_z must be > 0, got {}", calibration_min_z));
+  if (!(calibration_min_shift_px >= 0))
+    Fail(fmt::format("init: calibration_min_shift_px must be >= 0, got {}", calibration_min_shift_px));
 }
 
 void MappingOptions::Check() const {
@@ -188,8 +191,13 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   return out;
 }
 
-void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes) {
+void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes,
+                        const std::optional<PinholeCamera>& camera) {
   if (!map_.frames.empty() || initialised_) throw std::logic_error("System::StartInMap: only before the first frame");
+  if (camera) {
+    camera->Check();
+    camera_ = *camera;
+  }
   for (MapPoint& p : points) {
     loaded_points_.insert(p.id);
     p.state = PointState::kLost;

@@ -85,6 +85,20 @@ struct InitOptions {
   // new map, newest first, for as long as one is (at least the tracker's min_inliers agreeing, and at least
   // half of the map points it sees), and placed again after every settling adjustment.
   bool pose_frames_before_reference = true;
+  // Self-calibration of the lens' first radial distortion coefficient, once, at the settling's last adjustment
+  // (geometry/self_calibration.h, docs/self_calibration.md): at most 40 of the window's frames and their points
+  // adjusted again with k1 free and as given. The focal length stays as given: over a settling window it trades
+  // with k1 (correlation ~0.9), and two halves of 7-Scenes gave focal lengths 10 % apart. The measured k1 replaces
+  // the given one when the change is both significant and material: a likelihood ratio of at least
+  // calibration_min_z standard deviations, and a shift of at least calibration_min_shift_px of a feature seen at
+  // the image's farthest corner. Tracks err together, so the ratio over-states real tracks' evidence: the
+  // rendered scenarios' exact cameras gave up to 6.5 (1.5 px), KITTI's rectified one 1.1, 7-Scenes' nominal
+  // camera 14.8-16.6 (6-8 px; robustness matrix, seeds 1-10). Every stored feature is then undistorted again and
+  // the window adjusted with the new camera; the map and the caller go on with it (System::camera). Needs the
+  // settling (settle_parallax_deg > 0).
+  bool self_calibrate = true;
+  double calibration_min_z = 10.0;
+  double calibration_min_shift_px = 3.0;
   void Check() const;
 };
 
@@ -231,6 +245,7 @@ struct FrameReport {
   Pose smoothed_cam_from_world;
   bool keyframe = false;
   bool initialisation = false;  // the pose came from the two-view initialisation
+  bool self_calibration = false;  // the lens' k1 was measured on this frame (InitOptions::self_calibrate): the note says
   // A later correction of an earlier frame's pose (the settling after initialisation): only cam_from_world
   // (and the residual statistics) replace those of that frame's report; the rest of it stands.
   bool pose_update = false;
@@ -267,6 +282,20 @@ struct BridgeState {
   std::unordered_set<int64_t> points;  // its points
 };
 
+// What the self-calibration (InitOptions::self_calibrate) measured, and whether it replaced the camera's k1.
+struct SelfCalibration {
+  bool tried = false;
+  bool accepted = false;
+  int64_t frame = -1;          // the frame whose settling measured it
+  double k1_given = 0;         // the camera's k1 before
+  double k1_measured = 0;      // the window's best k1 (the camera's k1 after, when accepted)
+  double sigma_k1 = 0;         // the standard deviation its likelihood ratio implies
+  double z = 0;                // |k1_measured - k1_given| / sigma_k1: the square root of the likelihood ratio
+  double corner_shift_px = 0;  // how far the change moves a feature seen at the image's farthest corner
+  int frames = 0, points = 0, observations = 0;
+  std::string note;            // one line: what was measured and what was done
+};
+
 class System {
  public:
   ~System();  // waits for a local bundle adjustment still being solved (MappingOptions::local_ba_async)
@@ -299,7 +328,10 @@ class System {
   // the first frame; throws std::logic_error after one. The System is then initialised but not localised: a
   // frame without a pose hint is lost until one is relocalised against the map (Relocalise, then Process with
   // the pose as its hint); tracking and mapping go on from there, in the map's frame and scale.
-  void StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes);
+  // `camera`, when given, replaces the System's: a map made by a run that self-calibrated its k1 carries the
+  // refined camera (its features are undistorted with it). The caller checks that it differs only in k1.
+  void StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes,
+                  const std::optional<PinholeCamera>& camera = std::nullopt);
   bool initialised() const { return initialised_; }
   // Some frame has a pose: false before the initialisation, and in a loaded map before its first relocalisation.
   bool localised() const { return last_posed_slot_ >= 0; }
@@ -311,7 +343,9 @@ class System {
   // (the rest of the map is at another scale).
   bool AtCurrentScale(int64_t point_id) const { return !bridging() || Provisional(point_id); }
   const Map& map() const { return map_; }
+  // The camera the map is made with: the given one, or with its k1 self-calibrated (InitOptions::self_calibrate).
   const PinholeCamera& camera() const { return camera_; }
+  const SelfCalibration& self_calibration() const { return self_calibration_; }
 
  private:
   bool TryInitialise(std::vector<FrameReport>* out);
@@ -373,6 +407,10 @@ class System {
   // is above the outlier threshold leaves the map. Returns how many left.
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   void Settle(int slot, std::vector<FrameReport>* out);
+  // InitOptions::self_calibrate, on the settling's last window after its adjustment (cams, wp.X: adjusted): true
+  // when the camera's k1 was replaced (every stored feature then undistorted again with it).
+  static constexpr int kCalibrationFrames = 40;
+  bool SelfCalibrate(const std::vector<int>& window, const std::vector<Pose>& cams, const WindowPoints& wp, int slot);
   // InitOptions::pose_frames_before_reference: places frames before_slot-1, before_slot-2, ... (not before
   // first_slot) while each can be; the ones placed get poses. Returns the first slot placed (before_slot:
   // none).
@@ -433,6 +471,7 @@ class System {
   int posed_from_ = -1;            // the first posed slot: the reference, or a frame before it (pose_frames_before_reference)
   int pruned_until_ = 0;           // frames before this slot have dropped their features (history_frames)
   double init_baseline_ = 1.0;     // its distance from the reference camera: the scale, kept by every settling
+  SelfCalibration self_calibration_;
   // The median residual of the map's points in the last keyframes (MappingOptions::max_relative_depth_noise).
   static constexpr size_t kResidualHistory = 15;
   std::deque<double> recent_residual_px_;

@@ -16,6 +16,7 @@
 #include "geometry/bundle_adjust.h"
 #include "geometry/pnp.h"
 #include "geometry/rotation_only.h"
+#include "geometry/self_calibration.h"
 #include "geometry/triangulation.h"
 #include "slam/fibonacci.h"
 #include "slam/system_internal.h"
@@ -123,8 +124,6 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   std::vector<Pose> cams;
   for (int s : window) cams.push_back(map_.frames[s].cam_from_world);
   WindowPoints wp = CollectWindowPoints(window);
-  std::vector<Eigen::Vector3d>& X = wp.X;
-  const std::vector<geometry::BundleObservation>& obs = wp.obs;
   std::vector<bool> fixed(window.size(), false);
   fixed.front() = true;  // the reference camera is the world
   geometry::BundleAdjustOptions bo;
@@ -134,7 +133,16 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
   // the same trajectory.
   bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
-  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
+  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !self_calibration_.tried &&
+      SelfCalibrate(window, cams, wp, slot)) {
+    // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
+    std::vector<Eigen::Vector3d> adjusted = std::move(wp.X);
+    wp = CollectWindowPoints(window);
+    wp.X = std::move(adjusted);
+    geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
+  }
+  std::vector<Eigen::Vector3d>& X = wp.X;
   // The scale: the initialisation's baseline keeps its length (1, or the ground truth's with --gt-scale).
   const auto init_it = std::find(window.begin(), window.end(), init_slot_);
   const double b = init_it == window.end()
@@ -175,9 +183,13 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
       f.cam_from_world = moved_by[*(std::upper_bound(window.begin(), window.end(), k) - 1)] * f.cam_from_world;
     }
   }
-  const std::string note = fmt::format(
+  std::string note = fmt::format(
       "{}: {} of {} frames and {} points refined together at a median parallax of {:.1f} deg",
       parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(), parallax);
+  if (self_calibration_.tried && self_calibration_.frame == cur.index) {
+    note += "; " + self_calibration_.note;
+    out->front().self_calibration = true;
+  }
   settling_ = parallax < io.settle_parallax_deg;
   next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
   out->front().cam_from_world = cur.cam_from_world;
@@ -189,6 +201,80 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
     r.pose_update = true;
     out->push_back(r);
   }
+}
+
+namespace {
+
+// The pixel that `to` undistorts a feature to, when `from` undistorted it to uv_px (same K, other distortion).
+Eigen::Vector2d Reundistort(const PinholeCamera& from, const PinholeCamera& to, const Eigen::Vector2d& uv_px) {
+  const Eigen::Vector2d n = from.PixelToNormalized(uv_px);
+  return to.UndistortPixel(from.NormalizedToPixel(from.HasDistortion() ? from.Distort(n) : n));
+}
+
+}  // namespace
+
+bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pose>& cams, const WindowPoints& wp,
+                           int slot) {
+  const InitOptions& io = options_.init;
+  SelfCalibration& c = self_calibration_;
+  c.tried = true;
+  c.frame = map_.frames[slot].index;
+  c.k1_given = c.k1_measured = camera_.dist.k1;
+  // At most kCalibrationFrames of the window, evenly spread (its first frame, the reference, among them): the
+  // adjustment's cost grows with the observations, and neighbouring frames of the same tracks add little.
+  const int n = static_cast<int>(window.size()), m = std::min(n, kCalibrationFrames);
+  std::vector<int> camera_of(window.size(), -1);  // window position -> calibration camera
+  std::vector<Pose> sub_cams;
+  std::vector<bool> fixed;
+  for (int i = 0; i < m; ++i) {
+    const int w = static_cast<int>(static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1));
+    if (camera_of[w] >= 0) continue;
+    camera_of[w] = static_cast<int>(sub_cams.size());
+    sub_cams.push_back(cams[w]);
+    fixed.push_back(sub_cams.size() <= 2);  // the gauge and the scale: the first two frames taken
+  }
+  // Points seen at least twice among them, and their observations as the camera saw them (distorted pixels).
+  std::vector<int> seen(wp.X.size(), 0);
+  for (const geometry::BundleObservation& o : wp.obs) seen[o.point] += camera_of[o.camera] >= 0;
+  std::vector<int> point_of(wp.X.size(), -1);
+  std::vector<Eigen::Vector3d> X;
+  std::vector<geometry::PixelObservation> obs;
+  for (const geometry::BundleObservation& o : wp.obs) {
+    if (camera_of[o.camera] < 0 || seen[o.point] < 2) continue;
+    if (point_of[o.point] < 0) point_of[o.point] = static_cast<int>(X.size()), X.push_back(wp.X[o.point]);
+    obs.push_back({camera_of[o.camera], point_of[o.point],
+                   camera_.NormalizedToPixel(camera_.HasDistortion() ? camera_.Distort(o.uv_norm) : o.uv_norm)});
+  }
+  geometry::IntrinsicsOptions co;
+  co.loss_px = io.refine_huber_px;
+  co.free_focal = false;
+  co.num_threads = 1;  // the same seed, the same result
+  const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(camera_, sub_cams, X, obs, fixed, co);
+  c.frames = static_cast<int>(sub_cams.size());
+  c.points = static_cast<int>(X.size());
+  c.observations = fit.observations;
+  c.k1_measured = fit.camera.dist.k1;
+  c.sigma_k1 = fit.sigma_k1;
+  c.z = std::sqrt(fit.chi2);
+  c.corner_shift_px = 0;
+  for (const Eigen::Vector2d corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera_.width - 1, 0),
+                                       Eigen::Vector2d(0, camera_.height - 1),
+                                       Eigen::Vector2d(camera_.width - 1, camera_.height - 1)})
+    c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - camera_.UndistortPixel(corner)).norm());
+  c.accepted = std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
+               c.corner_shift_px >= io.calibration_min_shift_px;
+  c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
+                       "the farthest corner): {}",
+                       c.accepted ? "self-calibrated" : "checked", c.frames, c.points, c.k1_measured, c.sigma_k1, c.z,
+                       c.corner_shift_px,
+                       c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
+                                  : fmt::format("k1 {:g} kept", c.k1_given));
+  if (!c.accepted) return false;
+  const PinholeCamera given = camera_;
+  camera_.dist.k1 = c.k1_measured;
+  for (FrameRecord& f : map_.frames)
+    for (FeatureUndistorted& u : f.features) u.uv_px = Reundistort(given, camera_, u.uv_px);
+  return true;
 }
 
 geometry::PnpOptions System::TrackerPnpOptions(int min_inliers) const {

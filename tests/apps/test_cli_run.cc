@@ -11,6 +11,8 @@
 
 #include <fmt/format.h>
 
+#include "io/camera_io.h"
+#include "io/observations_io.h"
 #include "io/ply.h"
 #include "io/trajectory_io.h"
 #include "cli_report.h"
@@ -233,6 +235,40 @@ TEST(CliRun, FullSlamWritesTrajectoryMapAndPerFrameErrors) {
   // Clean data: the paper's bounds with a wide margin (measured ~2 mm / 0.05 deg).
   const double ate = std::stod(r.output.substr(r.output.find("trans_mean_m=") + 13));
   EXPECT_LT(ate, 0.01);
+}
+
+// Observations through a lens with k1 = -0.25 that the camera file does not declare (8-9 px at the corners of
+// 320x240 at f = 500 px): the run measures it when its first map settles, says so, goes on with it, reports it
+// and writes the camera it used. tests/slam/test_system.cc checks the accuracy it buys.
+TEST(CliRun, AnUndeclaredLensDistortionIsSelfCalibratedAndReported) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 150 --noise 0.5 --out " + dir / "s").exit_code, 0);
+  const PinholeCamera camera = io::ReadCameraYaml(dir / "s/camera.yaml");
+  PinholeCamera lens = camera;
+  lens.dist.k1 = -0.25;
+  std::vector<io::ObservationFrame> frames = io::ReadObservations(dir / "s/observations.txt");
+  for (io::ObservationFrame& f : frames)
+    for (io::Observation& o : f.observations) {
+      const Eigen::Vector2d uv = lens.NormalizedToPixel(lens.Distort(camera.PixelToNormalized({o.u_px, o.v_px})));
+      o.u_px = uv.x(), o.v_px = uv.y();
+    }
+  io::WriteObservations(dir / "s/observations.txt", frames);
+  const auto r = RunMcslam("run " + dir / "s --hypotheses 65536 --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("lens distortion k1 self-calibrated"), std::string::npos) << r.output;
+  const nlohmann::json c = testing::ReadJson(dir / "r/report.json")["self_calibration"];
+  ASSERT_TRUE(c.is_object()) << c.dump();
+  EXPECT_TRUE(c["accepted"].get<bool>()) << c.dump();
+  EXPECT_EQ(c["k1_given"], 0.0);
+  EXPECT_NEAR(c["k1_measured"].get<double>(), -0.25, 0.04) << c.dump();  // as in the System's test
+  const PinholeCamera used = io::ReadCameraYaml(dir / "r/camera_selfcalibrated.yaml");
+  EXPECT_NEAR(used.dist.k1, c["k1_measured"].get<double>(), 1e-9);
+  EXPECT_EQ(used.fx, camera.fx);
+  // Off: nothing measured, nothing written.
+  const auto off = RunMcslam("run " + dir / "s --hypotheses 65536 --no-self-calibration --out " + dir / "o");
+  ASSERT_EQ(off.exit_code, 0) << off.output;
+  EXPECT_TRUE(testing::ReadJson(dir / "o/report.json")["self_calibration"].is_null());
+  EXPECT_FALSE(std::filesystem::exists(dir / "o/camera_selfcalibrated.yaml"));
 }
 
 TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {

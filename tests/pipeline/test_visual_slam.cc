@@ -218,6 +218,24 @@ TEST(VisualSlamMap, AMapLoadedAndSavedAgainIsTheSameFile) {
   for (const io::MapFileKeyframe& k : map.keyframes)
     for (int64_t id : k.feature_ids) max_id = std::max(max_id, id);
   EXPECT_GT(second.frontend().NextFeatureId(), max_id);
+
+  // A map whose run self-calibrated its lens' k1 (InitOptions::self_calibrate) is loaded with the camera as
+  // given, and the run goes on with the map's k1 (its features are undistorted with it); any other difference is
+  // refused.
+  io::MapFile calibrated = map;
+  calibrated.camera.dist.k1 = -0.03;
+  VisualSlam third = Make(scene);
+  third.LoadMap(calibrated);
+  EXPECT_EQ(third.system().camera().dist.k1, -0.03);
+  EXPECT_EQ(third.ExportMap().camera.dist.k1, -0.03);
+  calibrated.camera.dist.k2 = 0.01;
+  VisualSlam fourth = Make(scene);
+  try {
+    fourth.LoadMap(calibrated);
+    ADD_FAILURE() << "a map of another lens was loaded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("k2"), std::string::npos) << e.what();
+  }
 }
 
 TEST(VisualSlamMap, AMapIsRefusedWhereItCannotBeUsed) {
