@@ -42,7 +42,7 @@ EOF
   echo
   echo "## Self-calibrating (the default) against the camera kept as given"
   echo
-  echo "| seed | ATE cm | orientation deg | k1 measured | sigma | corner shift px | taken | ATE cm, kept as given | orientation deg, kept as given |"
+  echo "| seed | ATE cm | orientation deg | k1 measured | standard deviations (z) | corner shift px | taken | ATE cm, kept as given | orientation deg, kept as given |"
   echo "|---|---|---|---|---|---|---|---|---|"
   for seed in $(seq 1 "$SEEDS"); do
     a=$(run "default_$seed" "$seed" "525 525 320 240")

@@ -93,7 +93,7 @@ struct InitOptions {
   // calibration_min_z standard deviations, and a shift of at least calibration_min_shift_px of a feature seen at
   // the image's farthest corner. Tracks err together, so the ratio over-states real tracks' evidence: the
   // rendered scenarios' exact cameras gave up to 6.5 (1.5 px), KITTI's rectified one 1.1, 7-Scenes' nominal
-  // camera 14.8-16.6 (6-8 px; robustness matrix, seeds 1-10). Every stored feature is then undistorted again and
+  // camera 14.1-16.6 (6-8 px; robustness matrix, seeds 1-10). Every stored feature is then undistorted again and
   // the window adjusted with the new camera; the map and the caller go on with it (System::camera). Needs the
   // settling (settle_parallax_deg > 0).
   bool self_calibrate = true;
