@@ -128,12 +128,16 @@ IntrinsicsFit RefineIntrinsics(const PinholeCamera& camera, const std::vector<Po
   front.reserve(obs.size());
   for (const PixelObservation& o : obs)
     if ((cams[o.camera] * pts[o.point]).z() > 1e-9) front.push_back(o);
+  IntrinsicsFit fit;
+  fit.camera = camera;
+  if (front.empty()) {  // nothing measures the camera: it stays as given
+    fit.report = "no observation in front of its camera";
+    return fit;
+  }
   const Solved a = Solve(camera, cams, pts, front, fixed, false, options);
   const Solved b = Solve(camera, cams, pts, front, fixed, true, options);
-  IntrinsicsFit fit;
   fit.focal_scale = b.intr[0];
   fit.delta_k1 = b.intr[1];
-  fit.camera = camera;
   fit.camera.fx *= b.intr[0];
   fit.camera.fy *= b.intr[0];
   fit.camera.dist.k1 += b.intr[1];

@@ -114,6 +114,18 @@ TEST(SelfCalibration, RefusesBadInputNamingIt) {
   EXPECT_THROW(RefineIntrinsics(s.truth, s.cams, s.pts, bad, s.fixed, K1Only()), std::invalid_argument);
   EXPECT_THROW(RefineIntrinsics(s.truth, s.cams, s.pts, s.obs, std::vector<bool>(3, true), K1Only()),
                std::invalid_argument);
+  // Nothing to measure the camera by (no observation, or every point behind its camera): the camera as given.
+  const PinholeCamera given = s.Given(0.01);
+  for (const bool behind : {false, true}) {
+    std::vector<Eigen::Vector3d> pts = s.pts;
+    if (behind)
+      for (Eigen::Vector3d& p : pts) p.z() = -p.z();
+    const IntrinsicsFit fit =
+        RefineIntrinsics(given, s.cams, pts, behind ? s.obs : std::vector<PixelObservation>{}, s.fixed, K1Only());
+    EXPECT_EQ(fit.camera.dist.k1, 0.01);
+    EXPECT_EQ(fit.chi2, 0.0);
+    EXPECT_EQ(fit.observations, 0);
+  }
 }
 
 }  // namespace
