@@ -205,10 +205,14 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
 
 namespace {
 
+// The pixel at which `camera` sees the ray through undistorted normalised coordinates n (distortion applied).
+Eigen::Vector2d SeenPixel(const PinholeCamera& camera, const Eigen::Vector2d& n) {
+  return camera.NormalizedToPixel(camera.HasDistortion() ? camera.Distort(n) : n);
+}
+
 // The pixel that `to` undistorts a feature to, when `from` undistorted it to uv_px (same K, other distortion).
 Eigen::Vector2d Reundistort(const PinholeCamera& from, const PinholeCamera& to, const Eigen::Vector2d& uv_px) {
-  const Eigen::Vector2d n = from.PixelToNormalized(uv_px);
-  return to.UndistortPixel(from.NormalizedToPixel(from.HasDistortion() ? from.Distort(n) : n));
+  return to.UndistortPixel(SeenPixel(from, from.PixelToNormalized(uv_px)));
 }
 
 }  // namespace
@@ -242,8 +246,7 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   for (const geometry::BundleObservation& o : wp.obs) {
     if (camera_of[o.camera] < 0 || seen[o.point] < 2) continue;
     if (point_of[o.point] < 0) point_of[o.point] = static_cast<int>(X.size()), X.push_back(wp.X[o.point]);
-    obs.push_back({camera_of[o.camera], point_of[o.point],
-                   camera_.NormalizedToPixel(camera_.HasDistortion() ? camera_.Distort(o.uv_norm) : o.uv_norm)});
+    obs.push_back({camera_of[o.camera], point_of[o.point], SeenPixel(camera_, o.uv_norm)});
   }
   geometry::IntrinsicsOptions co;
   co.loss_px = io.refine_huber_px;
