@@ -55,6 +55,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(
     jolt_min_failed_fraction, max_iterations, epsilon_px, min_eigen_threshold, max_forward_backward_px,
     max_patch_error, track_border_px, anchor_every, anchor_patch_px, anchor_min_correlation, anchor_max_shift_px,
     anchor_mismatch, anchor_auto_reanchor_fraction, anchor_max_scale_change, anchor_min_texture_ratio,
+    anchor_max_iterations, anchor_epsilon_px,
     use_kalman_prediction, kalman_accel_sigma_px, kalman_measurement_sigma_px, init_velocity_radius_px,
     descriptor_size_px, describe_async, descriptor_refresh_frames, remap_window_px, remap_max_candidates,
     remap_max_distance, remap_ratio)

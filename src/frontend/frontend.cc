@@ -68,6 +68,9 @@ void FrontendOptions::Check() const {
     fail(fmt::format("anchor_max_scale_change must be > 1 (got {})", anchor_max_scale_change));
   if (!(anchor_min_texture_ratio >= 0 && anchor_min_texture_ratio < 1))
     fail(fmt::format("anchor_min_texture_ratio must be in [0, 1) (got {})", anchor_min_texture_ratio));
+  if (anchor_max_iterations < 1) fail(fmt::format("anchor_max_iterations must be >= 1 (got {})", anchor_max_iterations));
+  if (!(anchor_epsilon_px > 0) || !std::isfinite(anchor_epsilon_px))
+    fail(fmt::format("anchor_epsilon_px must be > 0 (got {})", anchor_epsilon_px));
   if (track_border_px < 0) fail(fmt::format("track_border_px must be >= 0 (got {})", track_border_px));
   if (!(kalman_accel_sigma_px > 0) || !std::isfinite(kalman_accel_sigma_px))
     fail(fmt::format("kalman_accel_sigma_px must be positive (got {})", kalman_accel_sigma_px));

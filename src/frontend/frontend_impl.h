@@ -95,7 +95,8 @@ enum class AnchorOutcome : uint8_t { kNotAligned, kKept, kReanchor, kMismatch };
 // and the warp's linear part.
 inline AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, const cv::Point2f& uv,
                               const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
-  const AffinePatch::Result r = anchor.Align(gray, uv, *linear, 50, 0.001f);
+  const AffinePatch::Result r =
+      anchor.Align(gray, uv, *linear, o.anchor_max_iterations, static_cast<float>(o.anchor_epsilon_px));
   // Too near the edge to align: the track keeps its LK position this frame.
   if (!r.inside) return AnchorOutcome::kNotAligned;
   // A mirrored warp (negative determinant) is no view of the same surface.
@@ -157,6 +158,7 @@ struct Frontend::Impl {
 
   // Scratch kept between frames to avoid reallocating.
   cv::Mat eig, eig_dilated, blocked, hann;
+  cv::Mat gray_float;  // the frame as float pixels, for the birth-patch alignment's vector gathers
 
   double JoinDescription() {
     if (!pending) return 0.0;

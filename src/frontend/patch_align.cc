@@ -60,6 +60,15 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
     Eigen::Map<const Eigen::Matrix<float, 6, 1>> sd(descent[static_cast<size_t>(k)].data());
     H += (sd * sd.transpose()).cast<double>();
   }
+  for (size_t j = 0; j < 6; ++j) {
+    descent_[j].resize(static_cast<size_t>(n));
+    double dot = 0;
+    for (size_t k = 0; k < static_cast<size_t>(n); ++k) {
+      descent_[j][k] = descent[k][j];
+      dot += static_cast<double>(descent[k][j]) * values[k];
+    }
+    descent_dot_values_[j] = dot;
+  }
   if (!(norm2 > 1e-6)) return;  // a flat patch: nothing to align
   Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
   if (!lu.isInvertible()) return;
@@ -71,19 +80,43 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
   half_ = h;
   values_ = std::move(values);
   norm_ = static_cast<float>(std::sqrt(norm2));
-  descent_ = std::move(descent);
   hessian_inv_ = lu.inverse();
 }
 
+namespace {
+
+// Bilinear samples of `image` (8-bit or float pixels, `stride` pixels a row) at x0 + k dx, y0 + k dy for
+// k < n, written to `out`; returns their sum. The caller has checked that the row's ends are inside the image;
+// clamping keeps rounding from reaching past the last pixel.
+template <typename Pixel>
+float SampleRow(const Pixel* image, size_t stride, int cols, int rows, float x0, float y0, float dx, float dy, int n,
+                float* out) {
+  float row = 0;
+#pragma omp simd reduction(+ : row)
+  for (int k = 0; k < n; ++k) {
+    const float x = x0 + static_cast<float>(k) * dx, y = y0 + static_cast<float>(k) * dy;
+    const int xi = std::min(static_cast<int>(x), cols - 2), yi = std::min(static_cast<int>(y), rows - 2);
+    const float fx = x - static_cast<float>(xi), fy = y - static_cast<float>(yi);
+    const size_t at = static_cast<size_t>(yi) * stride + static_cast<size_t>(xi);
+    const float p00 = static_cast<float>(image[at]), p01 = static_cast<float>(image[at + 1]);
+    const float p10 = static_cast<float>(image[at + stride]), p11 = static_cast<float>(image[at + stride + 1]);
+    const float top = p00 + fx * (p01 - p00), bottom = p10 + fx * (p11 - p10);
+    out[k] = top + fy * (bottom - top);
+    row += out[k];
+  }
+  return row;
+}
+
+}  // namespace
+
 AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& centre_in, const cv::Matx22f& linear_in,
                                        int max_iterations, float epsilon_px) const {
-  CV_Assert(gray.type() == CV_8UC1);
+  CV_Assert(gray.type() == CV_8UC1 || gray.type() == CV_32FC1);
+  const bool float_image = gray.type() == CV_32FC1;
   Result r;
   if (empty()) return r;
   const int n = side_ * side_;
   const float w1 = static_cast<float>(gray.cols - 1), h1 = static_cast<float>(gray.rows - 1);
-  const size_t step = gray.step[0];
-  const uint8_t* data = gray.data;
   thread_local std::vector<float> sampled;  // one buffer per thread: no allocation per call once grown
   sampled.resize(static_cast<size_t>(n));
   cv::Matx22f L = linear_in;
@@ -98,44 +131,44 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
           return r;
         }
       }
+    // Bilinear samples, row by row (a row's positions step by the warp's first column); each row's loop runs
+    // as vector lanes (gathers where the CPU has them). Summed per row in float and across rows in double.
     double sum = 0;
     for (int py = 0; py < side_; ++py) {
       const float dy = static_cast<float>(py) - half_;
-      for (int px = 0; px < side_; ++px) {
-        const float dx = static_cast<float>(px) - half_;
-        const float x = L(0, 0) * dx + L(0, 1) * dy + c.x, y = L(1, 0) * dx + L(1, 1) * dy + c.y;
-        // Clamped: the corners bound every sample up to rounding, which must not reach past the last pixel.
-        const int x0 = std::min(static_cast<int>(x), gray.cols - 2), y0 = std::min(static_cast<int>(y), gray.rows - 2);
-        const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
-        const uint8_t* p = data + static_cast<size_t>(y0) * step + x0;
-        const float v = (1 - fy) * ((1 - fx) * p[0] + fx * p[1]) + fy * ((1 - fx) * p[step] + fx * p[step + 1]);
-        sampled[static_cast<size_t>(py * side_ + px)] = v;
-        sum += v;
-      }
+      const float xr = L(0, 1) * dy - L(0, 0) * half_ + c.x, yr = L(1, 1) * dy - L(1, 0) * half_ + c.y;
+      sum += float_image ? SampleRow(reinterpret_cast<const float*>(gray.data), gray.step[0] / sizeof(float), gray.cols,
+                                     gray.rows, xr, yr, L(0, 0), L(1, 0), side_, sampled.data() + py * side_)
+                         : SampleRow(gray.data, gray.step[0], gray.cols, gray.rows, xr, yr, L(0, 0), L(1, 0), side_,
+                                     sampled.data() + py * side_);
     }
-    // Gain and bias: the sampled patch, zero-mean, scaled to the template's norm.
+    // Gain and bias: the sampled patch, zero-mean, scaled to the template's norm. One pass gives its norm, its
+    // correlation with the template and its products with the steepest-descent images; the error's products
+    // follow, as sum_k s_jk (d_k scale - t_k) = scale sum_k s_jk d_k - sum_k s_jk t_k.
     const float mean = static_cast<float>(sum / n);
-    double norm2 = 0, dot = 0;
+    const float* v = sampled.data();
+    const float* t = values_.data();
+    const float *s0 = descent_[0].data(), *s1 = descent_[1].data(), *s2 = descent_[2].data(),
+                *s3 = descent_[3].data(), *s4 = descent_[4].data(), *s5 = descent_[5].data();
+    float nn = 0, dt = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0, b4 = 0, b5 = 0;
+#pragma omp simd reduction(+ : nn, dt, b0, b1, b2, b3, b4, b5)
     for (int k = 0; k < n; ++k) {
-      const float v = sampled[static_cast<size_t>(k)] - mean;
-      sampled[static_cast<size_t>(k)] = v;
-      norm2 += static_cast<double>(v) * v;
-      dot += static_cast<double>(v) * values_[static_cast<size_t>(k)];
+      const float d = v[k] - mean;
+      nn += d * d;
+      dt += d * t[k];
+      b0 += s0[k] * d, b1 += s1[k] * d, b2 += s2[k] * d, b3 += s3[k] * d, b4 += s4[k] * d, b5 += s5[k] * d;
     }
-    const double norm = std::sqrt(norm2);
+    const double norm = std::sqrt(static_cast<double>(nn));
     r.inside = true;
     r.centre = c;
     r.linear = L;
     r.iterations = it;
-    r.correlation = norm > 1e-9 ? static_cast<float>(dot / (norm * norm_)) : 0.0f;
+    r.correlation = norm > 1e-9 ? static_cast<float>(dt / (norm * norm_)) : 0.0f;
     if (it == max_iterations || norm <= 1e-9) break;
-    const float scale = static_cast<float>(norm_ / norm);
-    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-    for (int k = 0; k < n; ++k) {
-      const float e = sampled[static_cast<size_t>(k)] * scale - values_[static_cast<size_t>(k)];
-      const std::array<float, 6>& s = descent_[static_cast<size_t>(k)];
-      for (int j = 0; j < 6; ++j) b[j] += static_cast<double>(s[static_cast<size_t>(j)]) * e;
-    }
+    const double scale = norm_ / norm;
+    const std::array<float, 6> bd = {b0, b1, b2, b3, b4, b5};
+    Eigen::Matrix<double, 6, 1> b;
+    for (int j = 0; j < 6; ++j) b[j] = scale * bd[static_cast<size_t>(j)] - descent_dot_values_[static_cast<size_t>(j)];
     const Eigen::Matrix<double, 6, 1> dp = hessian_inv_ * b;
     // Inverse composition: W <- W o W(dp)^-1, W(dp): offset -> (I + D) offset + d.
     const cv::Matx22f IplusD(static_cast<float>(1 + dp[0]), static_cast<float>(dp[1]), static_cast<float>(dp[2]),

@@ -34,8 +34,9 @@ class AffinePatch {
     cv::Matx22f linear;       // image offset = linear * patch offset (from the patch's centre)
     int iterations = 0;
   };
-  // Aligns with `gray` (8-bit) starting from (centre, linear); stops when an update moves the patch's
-  // corners by less than `epsilon_px`, or after `max_iterations`.
+  // Aligns with `gray` starting from (centre, linear); stops when an update moves the patch's corners by less
+  // than `epsilon_px`, or after `max_iterations`. `gray` is 8-bit or float (CV_32FC1): the same pixel values give
+  // the same result up to float rounding, and float pixels are sampled faster (by vector gathers).
   Result Align(const cv::Mat& gray, const cv::Point2f& centre, const cv::Matx22f& linear, int max_iterations = 30,
                float epsilon_px = 0.01f) const;
 
@@ -45,7 +46,11 @@ class AffinePatch {
   std::vector<float> values_;                   // template intensities minus their mean
   float norm_ = 0;                              // their L2 norm
   float texture_ratio_ = 0;
-  std::vector<std::array<float, 6>> descent_;   // steepest-descent images, one 6-vector per pixel
+  // Steepest-descent images, one array of side * side per warp parameter (contiguous: an iteration's sums
+  // over the pixels run as vector loops), and their dot products with the template (~0: they are made
+  // orthogonal to it; kept so that an iteration's step is the same sum as with the template subtracted).
+  std::array<std::vector<float>, 6> descent_;
+  std::array<double, 6> descent_dot_values_{};
   Eigen::Matrix<double, 6, 6> hessian_inv_;
 };
 

@@ -93,6 +93,12 @@ TEST(FrontendOptions, CheckNamesTheBadField) {
   o.max_forward_backward_px = -1;
   expect_bad(o, "max_forward_backward_px");
   o = {};
+  o.anchor_max_iterations = 0;
+  expect_bad(o, "anchor_max_iterations");
+  o = {};
+  o.anchor_epsilon_px = 0;
+  expect_bad(o, "anchor_epsilon_px");
+  o = {};
   o.cell_size_px = 0;
   EXPECT_THROW(Frontend{o}, std::invalid_argument);
 }

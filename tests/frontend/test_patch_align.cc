@@ -78,6 +78,34 @@ TEST(AffinePatch, RecoversAKnownAffineWarpUnderGainAndBias) {
   EXPECT_GT(e.correlation, 0.99999f);
 }
 
+// The front end aligns on the frame as float pixels (vector gathers): the same pixel values, so the same
+// alignment as on the 8-bit frame up to float rounding (the two sample loops may sum a row in another order):
+// tolerances 1e-3 px and 1e-4 on the warp, a thousandth of what the interpolation leaves (test above).
+TEST(AffinePatch, AFloatImageGivesTheSameAlignment) {
+  const BlobTexture tex(3);
+  const cv::Point2f at(160.0f, 120.0f), to(161.7f, 121.2f);
+  const float c = std::cos(0.05f), s = std::sin(0.05f);
+  const cv::Matx22f A(1.05f * c, -1.05f * s, 1.05f * s, 1.05f * c);
+  const cv::Mat a = Image(tex, at, at, cv::Matx22f::eye(), 1.0f, 0.0f);
+  const cv::Mat b = Image(tex, at, to, A, 0.9f, 5.0f);
+  cv::Mat b_float;
+  b.convertTo(b_float, CV_32F);
+  const AffinePatch patch(a, at, 21);
+  ASSERT_FALSE(patch.empty());
+  for (const cv::Point2f start : {to + cv::Point2f(0.7f, -0.4f), to + cv::Point2f(-1.2f, 0.9f)}) {
+    const AffinePatch::Result r8 = patch.Align(b, start, cv::Matx22f::eye(), 30, 1e-3f);
+    const AffinePatch::Result rf = patch.Align(b_float, start, cv::Matx22f::eye(), 30, 1e-3f);
+    ASSERT_TRUE(r8.inside && rf.inside);
+    EXPECT_GT(r8.iterations, 2);  // several updates, so that rounding had the chance to add up
+    std::printf("8-bit: %d iterations, %.4f px from the truth; float: %d, %.4f px\n", r8.iterations, cv::norm(r8.centre - to), rf.iterations, cv::norm(rf.centre - to));
+    EXPECT_LT(cv::norm(r8.centre - to), 0.08);
+    EXPECT_LT(cv::norm(r8.centre - rf.centre), 1e-3) << r8.centre << " " << rf.centre;
+    EXPECT_NEAR(r8.correlation, rf.correlation, 1e-5);
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(r8.linear.val[i], rf.linear.val[i], 1e-4) << i;
+  }
+  EXPECT_THROW(patch.Align(cv::Mat(240, 320, CV_16U, cv::Scalar(0)), to, cv::Matx22f::eye()), cv::Exception);
+}
+
 TEST(AffinePatch, AnotherPlaceCorrelatesPoorlyAndTheEdgeIsReported) {
   const cv::Mat a = Image(BlobTexture(3), {0, 0}, {0, 0}, cv::Matx22f::eye(), 1.0f, 0.0f);
   const cv::Mat other = Image(BlobTexture(4), {0, 0}, {0, 0}, cv::Matx22f::eye(), 1.0f, 0.0f);
