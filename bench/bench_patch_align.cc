@@ -1,7 +1,8 @@
 // Google Benchmark case for the front end's birth-patch alignment (frontend/patch_align.h; the `anchor` stage of
 // docs/timing.md, 9-11 ms a frame on KITTI 06 and 7-Scenes on 2 cores): every track's 21x21 birth patch aligned
-// with the next frame from where Lucas-Kanade put it, at most FrontendOptions::anchor_max_iterations. The frame is a textured 640x480 image with 1-level noise; the next one sees it through a small affine
-// warp (2 % scale, 2 degrees, 3 px) with another gain and bias, and each alignment starts 0.5 px off (LK's error).
+// with the next frame from where Lucas-Kanade put it, at most FrontendOptions::anchor_max_iterations. The frame
+// is a textured 640x480 image with 1-level noise; the next one sees it through a small affine warp (2 % scale,
+// 2 degrees, 3 px) with another gain and bias, and each alignment starts 0.5 px off (LK's error).
 // Counters: calls a second, mean iterations a call, and how far the aligned centres land from the truth.
 #include <benchmark/benchmark.h>
 
@@ -36,7 +37,8 @@ Scene MakeScene() {
                      static_cast<float>(rng.Uniform(3, 9)), static_cast<float>(rng.Uniform(-70, 70))});
   const float angle = 2.0f * static_cast<float>(CV_PI) / 180.0f, scale = 1.02f;
   Scene s;
-  s.linear = cv::Matx22f(scale * std::cos(angle), -scale * std::sin(angle), scale * std::sin(angle), scale * std::cos(angle));
+  s.linear = cv::Matx22f(scale * std::cos(angle), -scale * std::sin(angle), scale * std::sin(angle),
+                         scale * std::cos(angle));
   const cv::Point2f centre(320, 240), shift(3.0f, -2.0f);
   const cv::Matx22f inv = s.linear.inv();
   auto render = [&](bool warped, float gain, float bias) {
@@ -45,7 +47,8 @@ Scene MakeScene() {
       const int r = static_cast<int>(std::ceil(3.5f * b.s * scale)) + 4;
       // The blob's centre in this frame, and its extent there.
       cv::Vec2f c(b.x, b.y);
-      if (warped) c = s.linear * cv::Vec2f(b.x - centre.x, b.y - centre.y) + cv::Vec2f(centre.x + shift.x, centre.y + shift.y);
+      if (warped)
+        c = s.linear * cv::Vec2f(b.x - centre.x, b.y - centre.y) + cv::Vec2f(centre.x + shift.x, centre.y + shift.y);
       for (int y = std::max(0, static_cast<int>(c[1]) - r); y < std::min(480, static_cast<int>(c[1]) + r); ++y)
         for (int x = std::max(0, static_cast<int>(c[0]) - r); x < std::min(640, static_cast<int>(c[0]) + r); ++x) {
           cv::Vec2f o(static_cast<float>(x) - c[0], static_cast<float>(y) - c[1]);
@@ -75,7 +78,8 @@ Scene MakeScene() {
 }
 
 // Args: the frame's pixels (0: 8-bit; 1: float, as the front end passes them, converted once outside the
-// timing), and the stop in thousandths of a pixel (10: FrontendOptions' default; 1: the stop before it).
+// timing), and the stop in thousandths of a pixel (1: FrontendOptions::anchor_epsilon_px's default; 10: a
+// looser stop, measured and not taken, see frontend.h).
 void BM_AnchorAlign(benchmark::State& state) {
   static const Scene scene = MakeScene();
   static const cv::Mat next_float = [] {
@@ -93,7 +97,8 @@ void BM_AnchorAlign(benchmark::State& state) {
     for (size_t i = 0; i < patches.size(); ++i) {
       const float a = static_cast<float>(i) * 2.39996f;  // start 0.5 px off, in a direction that turns per patch
       const cv::Point2f start = scene.truth[i] + cv::Point2f(0.5f * std::cos(a), 0.5f * std::sin(a));
-      const AffinePatch::Result r = patches[i].Align(next, start, cv::Matx22f::eye(), kOptions.anchor_max_iterations, epsilon_px);
+      const AffinePatch::Result r =
+          patches[i].Align(next, start, cv::Matx22f::eye(), kOptions.anchor_max_iterations, epsilon_px);
       benchmark::DoNotOptimize(r);
       ++calls;
       iterations += r.iterations;

@@ -138,7 +138,7 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     for (size_t i = 0; i < n; ++i)
       if (outcome[i] == kOk && !tracks[i].anchor.empty() && (tracks[i].age + 1) % o.anchor_every == 0) due.push_back(i);
     // Float pixels: the alignment's bilinear samples are then vector gathers (the same values as from the 8-bit
-    // frame, so the same result up to float rounding; 1.7x faster than 8-bit samples, bench_patch_align).
+    // frame, so the same result up to float rounding; 1.6x faster than 8-bit samples, bench_patch_align).
     if (!due.empty()) gray.convertTo(gray_float, CV_32F);
     tbb::parallel_for(size_t{0}, due.size(), [&](size_t k) {
       const size_t i = due[k];

@@ -60,15 +60,6 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
     Eigen::Map<const Eigen::Matrix<float, 6, 1>> sd(descent[static_cast<size_t>(k)].data());
     H += (sd * sd.transpose()).cast<double>();
   }
-  for (size_t j = 0; j < 6; ++j) {
-    descent_[j].resize(static_cast<size_t>(n));
-    double dot = 0;
-    for (size_t k = 0; k < static_cast<size_t>(n); ++k) {
-      descent_[j][k] = descent[k][j];
-      dot += static_cast<double>(descent[k][j]) * values[k];
-    }
-    descent_dot_values_[j] = dot;
-  }
   if (!(norm2 > 1e-6)) return;  // a flat patch: nothing to align
   Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
   if (!lu.isInvertible()) return;
@@ -81,6 +72,15 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
   values_ = std::move(values);
   norm_ = static_cast<float>(std::sqrt(norm2));
   hessian_inv_ = lu.inverse();
+  for (size_t j = 0; j < 6; ++j) {
+    descent_[j].resize(static_cast<size_t>(n));
+    double dot = 0;
+    for (size_t k = 0; k < static_cast<size_t>(n); ++k) {
+      descent_[j][k] = descent[k][j];
+      dot += static_cast<double>(descent[k][j]) * values_[k];
+    }
+    descent_dot_values_[j] = dot;
+  }
 }
 
 namespace {
@@ -133,15 +133,19 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
       }
     // Bilinear samples, row by row (a row's positions step by the warp's first column); each row's loop runs
     // as vector lanes (gathers where the CPU has them). Summed per row in float and across rows in double.
-    double sum = 0;
-    for (int py = 0; py < side_; ++py) {
-      const float dy = static_cast<float>(py) - half_;
-      const float xr = L(0, 1) * dy - L(0, 0) * half_ + c.x, yr = L(1, 1) * dy - L(1, 0) * half_ + c.y;
-      sum += float_image ? SampleRow(reinterpret_cast<const float*>(gray.data), gray.step[0] / sizeof(float), gray.cols,
-                                     gray.rows, xr, yr, L(0, 0), L(1, 0), side_, sampled.data() + py * side_)
-                         : SampleRow(gray.data, gray.step[0], gray.cols, gray.rows, xr, yr, L(0, 0), L(1, 0), side_,
-                                     sampled.data() + py * side_);
-    }
+    const auto sample = [&](const auto* image, size_t stride) {
+      double total = 0;
+      for (int py = 0; py < side_; ++py) {
+        const float dy = static_cast<float>(py) - half_;
+        const float xr = L(0, 1) * dy - L(0, 0) * half_ + c.x, yr = L(1, 1) * dy - L(1, 0) * half_ + c.y;
+        total += SampleRow(image, stride, gray.cols, gray.rows, xr, yr, L(0, 0), L(1, 0), side_,
+                           sampled.data() + py * side_);
+      }
+      return total;
+    };
+    const double sum = float_image
+                           ? sample(reinterpret_cast<const float*>(gray.data), gray.step[0] / sizeof(float))
+                           : sample(gray.data, gray.step[0]);
     // Gain and bias: the sampled patch, zero-mean, scaled to the template's norm. One pass gives its norm, its
     // correlation with the template and its products with the steepest-descent images; the error's products
     // follow, as sum_k s_jk (d_k scale - t_k) = scale sum_k s_jk d_k - sum_k s_jk t_k.

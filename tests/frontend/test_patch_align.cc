@@ -97,7 +97,8 @@ TEST(AffinePatch, AFloatImageGivesTheSameAlignment) {
     const AffinePatch::Result rf = patch.Align(b_float, start, cv::Matx22f::eye(), 30, 1e-3f);
     ASSERT_TRUE(r8.inside && rf.inside);
     EXPECT_GT(r8.iterations, 2);  // several updates, so that rounding had the chance to add up
-    std::printf("8-bit: %d iterations, %.4f px from the truth; float: %d, %.4f px\n", r8.iterations, cv::norm(r8.centre - to), rf.iterations, cv::norm(rf.centre - to));
+    std::printf("8-bit: %d iterations, %.4f px from the truth; float: %d, %.4f px\n", r8.iterations,
+                cv::norm(r8.centre - to), rf.iterations, cv::norm(rf.centre - to));
     EXPECT_LT(cv::norm(r8.centre - to), 0.08);
     EXPECT_LT(cv::norm(r8.centre - rf.centre), 1e-3) << r8.centre << " " << rf.centre;
     EXPECT_NEAR(r8.correlation, rf.correlation, 1e-5);
