@@ -11,6 +11,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -35,6 +36,7 @@ struct SynthArgs {
   CLI::Option* frames_flag = nullptr;
   CLI::Option* fps_flag = nullptr;
   CLI::Option* points_flag = nullptr;
+  std::vector<double> lens;  // k1 k2 p1 p2 [k3]
   bool render = false;
   sim::RenderOptions render_options;
 };
@@ -84,6 +86,15 @@ void RunSynth(SynthArgs& a) {
   if (a.frames_flag->count() > 0) o.frames = a.frames;
   if (a.fps_flag->count() > 0) o.fps = a.fps;
   if (a.points_flag->count() > 0) o.num_points = a.points;
+  if (!a.lens.empty()) {
+    const auto at = [&](size_t i) { return i < a.lens.size() ? a.lens[i] : 0.0; };
+    o.lens = Distortion{at(0), at(1), at(2), at(3), at(4)};
+    try {
+      o.Check();
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(std::string("--distortion: ") + e.what());
+    }
+  }
   // A path that ends (forward: the street) holds only so many frames; say which flags decide it.
   const sim::ScenarioInfo info = sim::DescribeScenario(o.name);
   const int frames = o.frames.value_or(info.frames);
@@ -156,6 +167,12 @@ void RegisterSynth(CLI::App& app) {
   cmd->add_option("--seed", o.seed, "Seed of the points, the path, the world's layout, the noise and the outliers")
       ->check(UnsignedInteger())
       ->capture_default_str();
+  cmd->add_option("--distortion", args->lens,
+                  "The lens the camera sees through, as a camera file gives it: K1 K2 P1 P2 [K3] (radial-tangential; "
+                  "e.g. a EuRoC-like -0.28 0.07 0 0); the observations and the rendered images go through it and "
+                  "camera.yaml declares it. Default: none")
+      ->expected(4, 5)
+      ->check(FiniteNumber(-1e6, false, 1e6, "a finite number"));
   cmd->add_flag("--render", args->render,
                 "Also write images/NNNNNN.png: the scene's textured surfaces, ray-cast for each frame's pose");
   cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")

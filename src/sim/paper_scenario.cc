@@ -136,11 +136,51 @@ void PaperScenarioOptions::Check() const {
   if (!(std::isfinite(speed) && speed > 0))
     throw std::invalid_argument("speed must be > 0 and finite, got " + Num(speed));
   if (num_points < 1) throw std::invalid_argument("num_points must be >= 1, got " + std::to_string(num_points));
+  CheckLens(PaperCamera(), lens);
+}
+
+void CheckLens(const PinholeCamera& camera, const Distortion& lens) {
+  const double c[5] = {lens.k1, lens.k2, lens.p1, lens.p2, lens.k3};
+  const auto name = [&] {
+    return fmt::format("lens distortion k1 {} k2 {} p1 {} p2 {} k3 {}", lens.k1, lens.k2, lens.p1, lens.p2, lens.k3);
+  };
+  for (double v : c)
+    if (!std::isfinite(v)) throw std::invalid_argument(name() + ": every coefficient must be finite");
+  if (lens.IsZero()) return;
+  // The radial polynomial r (1 + k1 r^2 + k2 r^4 + k3 r^6) must grow from the centre until it reaches the
+  // farthest corner's distorted radius (normalised units); past a turn two rays would land on one pixel.
+  double corner = 0;
+  for (double u : {0.0, camera.width - 1.0})
+    for (double v : {0.0, camera.height - 1.0})
+      corner = std::max(corner, camera.PixelToNormalized({u, v}).norm());
+  const auto radial = [&](double r) {
+    const double r2 = r * r;
+    return r * (1 + r2 * (lens.k1 + r2 * (lens.k2 + r2 * lens.k3)));
+  };
+  constexpr double kStep = 1e-3, kMaxRadius = 20.0;  // 20: 87 degrees off the axis
+  double prev = 0;
+  for (double r = kStep; prev < corner; r += kStep) {
+    if (r > kMaxRadius)
+      throw std::invalid_argument(fmt::format("{}: the image's corner is more than 87 degrees off the axis", name()));
+    const double d = radial(r);
+    if (!(d > prev))
+      throw std::invalid_argument(fmt::format(
+          "{}: the lens turns back {:.3f} off the axis (normalised radius), before the image's corner at distorted "
+          "radius {:.3f}: it does not map the image one to one",
+          name(), r, corner));
+    prev = d;
+  }
 }
 
 PinholeCamera PaperCamera() {
   return PinholeCamera(kPaperFocalPx, kPaperFocalPx, (kPaperWidthPx - 1) / 2.0, (kPaperHeightPx - 1) / 2.0,
                        kPaperWidthPx, kPaperHeightPx);
+}
+
+bool RayLandsOnItsPixel(const PinholeCamera& camera, const Eigen::Vector3d& point_in_cam, const Eigen::Vector2d& uv_px) {
+  if (!camera.HasDistortion()) return true;
+  const Eigen::Vector2d ray = point_in_cam.head<2>() / point_in_cam.z();
+  return (camera.Undistort(camera.PixelToNormalized(uv_px)) - ray).norm() < 1e-6;
 }
 
 bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
@@ -149,7 +189,7 @@ bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, con
   if (normal_in_world.dot(center_in_world - point_in_world) <= 0) return false;
   Eigen::Vector2d uv;
   if (!camera.Project(cam_from_world * point_in_world, &uv, nullptr, kMinDepthM)) return false;
-  if (!camera.InImage(uv)) return false;
+  if (!camera.InImage(uv) || !RayLandsOnItsPixel(camera, cam_from_world * point_in_world, uv)) return false;
   if (uv_px) *uv_px = uv;
   return true;
 }
@@ -158,6 +198,7 @@ SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options) {
   options.Check();
   SyntheticSequence seq;
   seq.camera = PaperCamera();
+  seq.camera.dist = options.lens;
   seq.fps = options.fps;
   seq.scene = PaperScene();
   MakeBoxPoints(options.num_points, options.seed, &seq.points_in_world, &seq.normals_in_world);

@@ -50,10 +50,19 @@ struct PaperScenarioOptions {
   double speed = 1.0;               // multiplies the speed along the (fixed) camera path, > 0
   int num_points = 400;             // points on the box surfaces, >= 1
   uint64_t seed = 1;                // seeds the points, the path's phases, the noise and the outliers
+  // The lens the images are seen through (radial-tangential, as a camera file declares it); none by default.
+  // Real cameras bend: a webcam's or a drone's lens moves the corners by tens of pixels, and the camera file
+  // says by how much. The rendered images and the observations both go through it.
+  Distortion lens;
 
   // Throws std::invalid_argument naming the bad field and its value, e.g. "noise_px must be >= 0, got -1".
   void Check() const;
 };
+
+// Throws std::invalid_argument when `lens` on `camera` does not map its image one to one (the distortion
+// polynomial turns back before the image's corners), naming the coefficients: such a lens cannot be undistorted
+// and no real camera has one.
+void CheckLens(const PinholeCamera& camera, const Distortion& lens);
 
 struct SyntheticObservation {
   int64_t feature_id = 0;                             // = index of the point in points_in_world
@@ -85,6 +94,11 @@ PinholeCamera PaperCamera();
 // On true, *uv_px (when given) holds the exact projection.
 bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, const Eigen::Vector3d& point_in_world,
                     const Eigen::Vector3d& normal_in_world, Eigen::Vector2d* uv_px = nullptr);
+
+// Through a lens, a point far off the axis can be bent back into the image (the distortion polynomial turns
+// past the field of view): it is seen only if its pixel's ray, undistorted, is its own ray. Always true without
+// distortion.
+bool RayLandsOnItsPixel(const PinholeCamera& camera, const Eigen::Vector3d& point_in_cam, const Eigen::Vector2d& uv_px);
 
 // Builds the scenario. Deterministic: the same options give bit-identical output, and a sequence of N frames
 // is the first N frames of a longer one with the same other options (the path is a function of time).

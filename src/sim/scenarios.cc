@@ -390,6 +390,7 @@ void ScenarioOptions::Check() const {
   shared.speed = speed;
   shared.num_points = num_points.value_or(info.num_points);
   shared.Check();
+  CheckLens(info.camera, lens);
   if (shared.frames > MaxFrames())
     throw std::invalid_argument(fmt::format(
         "frames must be at most {} for the {} scenario at speed {} and fps {} (its path ends after {} s of path "
@@ -408,10 +409,12 @@ SyntheticSequence MakeScenario(const ScenarioOptions& options) {
   o.speed = options.speed;
   o.num_points = options.num_points.value_or(info.num_points);
   o.seed = options.seed;
+  o.lens = options.lens;
   if (options.name == "paper") return MakePaperScenario(o);
 
   SyntheticSequence seq;
   seq.camera = info.camera;
+  seq.camera.dist = options.lens;
   seq.fps = o.fps;
   seq.scene = ScenarioScene(options.name, o.seed);
   SamplePointsOnQuads(seq.scene, o.num_points, o.seed, kStreamPoints, &seq.points_in_world, &seq.normals_in_world);

@@ -140,7 +140,7 @@ bool IsPointVisibleInScene(const PinholeCamera& camera, const Pose& cam_from_wor
   if (normal_in_world.dot(center_in_world - point_in_world) <= 0) return false;
   Eigen::Vector2d uv;
   if (!camera.Project(cam_from_world * point_in_world, &uv, nullptr, kMinDepthM)) return false;
-  if (!camera.InImage(uv)) return false;
+  if (!camera.InImage(uv) || !RayLandsOnItsPixel(camera, cam_from_world * point_in_world, uv)) return false;
   // The ray from the centre reaches the point at t = 1; its own quad is met there, not before. The margin
   // keeps a quad sharing the point's edge (a coplanar neighbour) from hiding it by rounding.
   const Eigen::Vector3d dir = point_in_world - center_in_world;

@@ -127,6 +127,10 @@ TEST(CliSynth, BadFlagsFailNamingTheFlag) {
   ExpectRefused("--scenario cube", "--scenario");
   ExpectRefused("--noise nan", "--noise");
   ExpectRefused("--seed -3", "--seed");
+  ExpectRefused("--distortion -0.28 0.07", "--distortion");            // 4 or 5 coefficients
+  ExpectRefused("--distortion -0.28 0.07 0 0 0 0", "--distortion");
+  ExpectRefused("--distortion nan 0 0 0", "--distortion");
+  ExpectRefused("--scenario forward --distortion -0.5 0 0 0", "--distortion");  // turns back inside the image
   const auto r = RunMcslam("synth --scenario paper --frames 5");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;

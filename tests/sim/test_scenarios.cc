@@ -232,5 +232,69 @@ TEST(Scenarios, OptionsAreCheckedNamingTheField) {
   EXPECT_NO_THROW(o.Check());
 }
 
+// A lens (radial-tangential, as a camera file declares it): the observations are the points' projections through
+// it, the renderer sees each observed point at its (bent) pixel, and the camera the sequence carries declares it.
+TEST(Scenarios, ALensBendsTheObservationsAndTheImagesAlike) {
+  ScenarioOptions o;
+  o.name = "forward";  // 81 degrees across: the lens moves its corners by tens of pixels
+  o.frames = 4;
+  o.lens = Distortion{-0.28, 0.07, 0.0002, 0.00002, 0.0};  // a EuRoC-like lens
+  const SyntheticSequence seq = MakeScenario(o);
+  EXPECT_EQ(seq.camera.dist.k1, -0.28);
+  EXPECT_EQ(seq.camera.dist.p2, 0.00002);
+  PinholeCamera pinhole = seq.camera;
+  pinhole.dist = Distortion{};
+  double most_bent = 0;
+  RenderOptions ro;
+  const SceneRenderer renderer(seq.scene, ro);
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    ASSERT_GE(seq.frames[i].observations.size(), 70u);
+    for (const SyntheticObservation& obs : seq.frames[i].observations) {
+      const Eigen::Vector3d& p = seq.points_in_world[static_cast<size_t>(obs.feature_id)];
+      Eigen::Vector2d uv, uv_pinhole;
+      ASSERT_TRUE(seq.camera.ProjectWorld(seq.cam_from_world[i], p, &uv));
+      ASSERT_TRUE(pinhole.ProjectWorld(seq.cam_from_world[i], p, &uv_pinhole));
+      EXPECT_LT((uv - obs.uv_px).norm(), 1e-9);
+      most_bent = std::max(most_bent, (uv - uv_pinhole).norm());
+      const auto hit = renderer.SurfacePoint(seq.camera, seq.cam_from_world[i], obs.uv_true_px);
+      ASSERT_TRUE(hit.has_value());
+      EXPECT_LT((hit->point - p).norm(), 1e-6);
+    }
+  }
+  // Barrel distortion pulls the edges in: at 0.9 normalised units (the corners) by about 15 % of the radius.
+  EXPECT_GT(most_bent, 20.0);
+}
+
+TEST(Scenarios, ALensThatTurnsBackIsRefusedAndAPointBentBackIntoTheImageIsNotSeen) {
+  ScenarioOptions o;
+  o.name = "forward";
+  o.lens.k1 = -0.5;  // r (1 - 0.5 r^2) turns at r = 0.82, before the forward camera's corners (0.9)
+  try {
+    o.Check();
+    ADD_FAILURE() << "a lens that turns back inside the image was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("k1 -0.5"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("one to one"), std::string::npos) << e.what();
+  }
+  o.lens.k2 = 0.2;  // the quartic term straightens it: one to one out to the corners
+  EXPECT_NO_THROW(o.Check());
+  o.lens = Distortion{std::nan(""), 0, 0, 0, 0};
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+
+  // k1 = -0.28 alone turns at r = 1.09 (r_d = 0.73): a point 2 units off the axis lands at r_d = -0.24, inside
+  // the paper camera's image, but its pixel's ray is another one.
+  PinholeCamera cam = PaperCamera();
+  cam.dist.k1 = -0.28;
+  const Eigen::Vector3d far_off(2.0, 0.0, 1.0), near_axis(0.1, 0.05, 1.0);
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(cam.Project(far_off, &uv));
+  EXPECT_TRUE(cam.InImage(uv));
+  EXPECT_FALSE(RayLandsOnItsPixel(cam, far_off, uv));
+  ASSERT_TRUE(cam.Project(near_axis, &uv));
+  EXPECT_TRUE(RayLandsOnItsPixel(cam, near_axis, uv));
+  cam.dist = Distortion{};
+  EXPECT_TRUE(RayLandsOnItsPixel(cam, far_off, {0, 0}));  // no lens: nothing to check
+}
+
 }  // namespace
 }  // namespace mcslam::sim
