@@ -173,6 +173,11 @@ void RegisterSynth(CLI::App& app) {
                   "camera.yaml declares it. Default: none")
       ->expected(4, 5)
       ->check(FiniteNumber(-1e6, false, 1e6, "a finite number"));
+  cmd->add_option("--image-scale", o.image_scale,
+                  "Scales the camera's image size and focal length together: the same field of view at another "
+                  "resolution (2: the paper's 320x240 becomes 640x480 at f = 1000 px)")
+      ->check(FiniteNumber(0, true, 64, "in (0, 64]"))
+      ->capture_default_str();
   cmd->add_flag("--render", args->render,
                 "Also write images/NNNNNN.png: the scene's textured surfaces, ray-cast for each frame's pose");
   cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")

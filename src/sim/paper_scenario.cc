@@ -136,7 +136,16 @@ void PaperScenarioOptions::Check() const {
   if (!(std::isfinite(speed) && speed > 0))
     throw std::invalid_argument("speed must be > 0 and finite, got " + Num(speed));
   if (num_points < 1) throw std::invalid_argument("num_points must be >= 1, got " + std::to_string(num_points));
+  if (!(std::isfinite(image_scale) && image_scale > 0 && std::lround(kPaperHeightPx * image_scale) >= 8))
+    throw std::invalid_argument("image_scale must be > 0, finite and leave an image of at least 8 rows, got " +
+                                Num(image_scale));
   CheckLens(PaperCamera(), lens);
+}
+
+PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale) {
+  PinholeCamera c = image_scale == 1.0 ? camera : camera.Scaled(image_scale);
+  c.dist = lens;
+  return c;
 }
 
 void CheckLens(const PinholeCamera& camera, const Distortion& lens) {
@@ -197,8 +206,7 @@ bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, con
 SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options) {
   options.Check();
   SyntheticSequence seq;
-  seq.camera = PaperCamera();
-  seq.camera.dist = options.lens;
+  seq.camera = ScenarioCamera(PaperCamera(), options.lens, options.image_scale);
   seq.fps = options.fps;
   seq.scene = PaperScene();
   MakeBoxPoints(options.num_points, options.seed, &seq.points_in_world, &seq.normals_in_world);

@@ -54,6 +54,9 @@ struct PaperScenarioOptions {
   // Real cameras bend: a webcam's or a drone's lens moves the corners by tens of pixels, and the camera file
   // says by how much. The rendered images and the observations both go through it.
   Distortion lens;
+  // The image's size and focal length scaled together (the same field of view at another resolution), > 0:
+  // 2 makes the paper's 320x240 camera 640x480 at f = 1000 px. Users' cameras run from 320x240 to 4K.
+  double image_scale = 1.0;
 
   // Throws std::invalid_argument naming the bad field and its value, e.g. "noise_px must be >= 0, got -1".
   void Check() const;
@@ -88,6 +91,9 @@ struct SyntheticSequence {
 
 // The paper's virtual camera: f = 500 px, 320x240, principal point at the image centre, no distortion.
 PinholeCamera PaperCamera();
+
+// `camera` with `lens` and scaled by `image_scale` (PinholeCamera::Scaled; 1 leaves it bit for bit).
+PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale);
 
 // True when the point is seen by the camera: its face faces the camera centre (n . (c - p) > 0, which for a
 // convex box is exact occlusion), its depth exceeds kMinDepthM, and its exact projection is in the image.

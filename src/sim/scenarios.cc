@@ -389,6 +389,7 @@ void ScenarioOptions::Check() const {
   shared.outlier_fraction = outlier_fraction;
   shared.speed = speed;
   shared.num_points = num_points.value_or(info.num_points);
+  shared.image_scale = image_scale;
   shared.Check();
   CheckLens(info.camera, lens);
   if (shared.frames > MaxFrames())
@@ -410,11 +411,11 @@ SyntheticSequence MakeScenario(const ScenarioOptions& options) {
   o.num_points = options.num_points.value_or(info.num_points);
   o.seed = options.seed;
   o.lens = options.lens;
+  o.image_scale = options.image_scale;
   if (options.name == "paper") return MakePaperScenario(o);
 
   SyntheticSequence seq;
-  seq.camera = info.camera;
-  seq.camera.dist = options.lens;
+  seq.camera = ScenarioCamera(info.camera, options.lens, options.image_scale);
   seq.fps = o.fps;
   seq.scene = ScenarioScene(options.name, o.seed);
   SamplePointsOnQuads(seq.scene, o.num_points, o.seed, kStreamPoints, &seq.points_in_world, &seq.normals_in_world);

@@ -265,6 +265,38 @@ TEST(Scenarios, ALensBendsTheObservationsAndTheImagesAlike) {
   EXPECT_GT(most_bent, 20.0);
 }
 
+// Another resolution, the same field of view: the camera's size and focal length scaled together, and every
+// observation where the unscaled one is, in the scaled pixel grid (centres: u' + 0.5 = s (u + 0.5)).
+TEST(Scenarios, AnImageScaleSeesTheSameSceneAtAnotherResolution) {
+  for (const std::string name : {"paper", "rotation"}) {
+    ScenarioOptions o;
+    o.name = name;
+    o.frames = 5;
+    const SyntheticSequence base = MakeScenario(o);
+    o.image_scale = 2.0;
+    const SyntheticSequence big = MakeScenario(o);
+    EXPECT_EQ(big.camera.width, 2 * base.camera.width);
+    EXPECT_EQ(big.camera.height, 2 * base.camera.height);
+    EXPECT_EQ(big.camera.fx, 2 * base.camera.fx);
+    ASSERT_EQ(big.frames.size(), base.frames.size());
+    for (size_t i = 0; i < big.frames.size(); ++i) {
+      std::map<int64_t, Eigen::Vector2d> at;
+      for (const SyntheticObservation& b : base.frames[i].observations) at[b.feature_id] = b.uv_px;
+      // At the image's edge a point can be just in one grid and just out of the other.
+      EXPECT_NEAR(static_cast<double>(big.frames[i].observations.size()),
+                  static_cast<double>(base.frames[i].observations.size()), 3.0);
+      for (const SyntheticObservation& b : big.frames[i].observations)
+        if (const auto it = at.find(b.feature_id); it != at.end())
+          EXPECT_LT((b.uv_px - (2.0 * (it->second + Eigen::Vector2d(0.5, 0.5)) - Eigen::Vector2d(0.5, 0.5))).norm(), 1e-9);
+    }
+  }
+  ScenarioOptions bad;
+  bad.image_scale = 0;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad.image_scale = std::nan("");
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 TEST(Scenarios, ALensThatTurnsBackIsRefusedAndAPointBentBackIntoTheImageIsNotSeen) {
   ScenarioOptions o;
   o.name = "forward";
