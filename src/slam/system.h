@@ -373,7 +373,8 @@ class System {
   // nullopt with *failure (when given) saying why.
   std::optional<InitHypothesis> RefineInitWindow(const std::vector<int>& window, const std::optional<Pose>& last_from_ref,
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
-                                                 std::string* failure, bool check_parallax = true) const;
+                                                 std::string* failure, bool check_parallax = true,
+                                                 bool dense_schur = false) const;
   // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
   // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
   // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).
@@ -415,6 +416,7 @@ class System {
   // explains it clearly better (InitOptions::ambiguity_chi2), *cams and wp->X become the mirror's (in the world
   // frame, the first camera where it was) and *why says so.
   bool FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp, std::string* why) const;
+  static constexpr int kFlipCheckFrames = 20;
   // InitOptions::self_calibrate, on the settling's last window after its adjustment (cams, wp.X: adjusted): true
   // when the camera's k1 was replaced (every stored feature then undistorted again with it).
   static constexpr int kCalibrationFrames = 40;

@@ -309,7 +309,7 @@ TEST(CliRun, ImagesThroughALensAreTrackedWhetherTheCameraFileDeclaresItOrNot) {
 // The rendered rotation scenario at 640x480 (a pan, then the first steps): its first two-view window is explained
 // a little better by the scene's mirror in depth than by the scene (frames 3-41 of seed 1, by a chi-square of 51;
 // seed 3 too): the map is made mirrored. Three frames later the settling window tells (the mirror's mean squared
-// residual 0.019 px^2 against the map's 0.041, a chi-square of 174 over its 149 tracks): the map is flipped, said in the log and in
+// residual 0.019 px^2 against the map's 0.041, a chi-square of 177 over its 149 tracks, judged on 20 of those frames): the map is flipped, said in the log and in
 // report.json. Measured, 50 frames: without the flip the orientations end 127 deg (seed 3: 166) off and the map
 // is mirrored; with it 1.65 deg (seed 3: 1.69). Bound 10 deg: 6x the flipped runs, a tenth of the mirrored ones.
 TEST(CliRun, AMapMadeOnTheMirrorOfTheSceneIsFlippedWhenTheFramesAfterItTell) {
