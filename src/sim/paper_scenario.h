@@ -53,7 +53,7 @@ struct PaperScenarioOptions {
   // The lens the images are seen through (radial-tangential, as a camera file declares it); none by default.
   // Real cameras bend: a webcam's or a drone's lens moves the corners by tens of pixels, and the camera file
   // says by how much. The rendered images and the observations both go through it.
-  Distortion lens;
+  Distortion lens{};
   // The image's size and focal length scaled together (the same field of view at another resolution), > 0:
   // 2 makes the paper's 320x240 camera 640x480 at f = 1000 px. Users' cameras run from 320x240 to 4K.
   double image_scale = 1.0;

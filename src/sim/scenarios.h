@@ -67,7 +67,7 @@ struct ScenarioOptions {
   double speed = 1.0;                            // multiplies the scenario's own speed along its path, > 0
   std::optional<int> num_points = std::nullopt;  // default: the scenario's
   uint64_t seed = 1;
-  Distortion lens;                               // as PaperScenarioOptions: the camera's lens, none by default
+  Distortion lens{};                             // as PaperScenarioOptions: the camera's lens, none by default
   double image_scale = 1.0;                      // as PaperScenarioOptions: the camera's resolution, scaled
 
   // The most frames the scenario's path holds at this speed and fps (INT_MAX when the path never ends).

@@ -285,9 +285,11 @@ TEST(Scenarios, AnImageScaleSeesTheSameSceneAtAnotherResolution) {
       // At the image's edge a point can be just in one grid and just out of the other.
       EXPECT_NEAR(static_cast<double>(big.frames[i].observations.size()),
                   static_cast<double>(base.frames[i].observations.size()), 3.0);
-      for (const SyntheticObservation& b : big.frames[i].observations)
-        if (const auto it = at.find(b.feature_id); it != at.end())
+      for (const SyntheticObservation& b : big.frames[i].observations) {
+        if (const auto it = at.find(b.feature_id); it != at.end()) {
           EXPECT_LT((b.uv_px - (2.0 * (it->second + Eigen::Vector2d(0.5, 0.5)) - Eigen::Vector2d(0.5, 0.5))).norm(), 1e-9);
+        }
+      }
     }
   }
   ScenarioOptions bad;
