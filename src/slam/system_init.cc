@@ -134,8 +134,6 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   // the same trajectory.
   bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
   geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
-  std::string reversal;
-  if (FlipIfMirrored(window, &cams, &wp, &reversal)) geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   if (parallax >= io.settle_parallax_deg && io.self_calibrate && !self_calibration_.tried &&
       SelfCalibrate(window, cams, wp, slot)) {
     // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
@@ -191,10 +189,6 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   if (self_calibration_.tried && self_calibration_.frame == cur.index) {
     note += "; " + self_calibration_.note;
     out->front().self_calibration = true;
-  }
-  if (!reversal.empty()) {
-    note += "; " + reversal;
-    out->front().depth_reversed = true;
   }
   settling_ = parallax < io.settle_parallax_deg;
   next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
@@ -370,8 +364,7 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
                                                                const std::optional<Pose>& last_from_ref,
                                                                std::vector<Eigen::Vector3d> points,
                                                                std::vector<int64_t> point_ids,
-                                                               std::string* failure, bool check_parallax,
-                                                               bool dense_schur) const {
+                                                               std::string* failure, bool check_parallax) const {
   const InitOptions& io = options_.init;
   const double focal = focal_px_;
   auto fail = [&](std::string why) -> std::optional<InitHypothesis> {
@@ -408,7 +401,6 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   geometry::BundleAdjustOptions bo;
   bo.focal_px = focal;
   bo.huber_px = io.refine_huber_px;
-  bo.dense_schur = dense_schur;
   if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
   std::vector<double> res;
   double cost = 0;
@@ -439,59 +431,6 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
                             "asks for it)",
                             refined_parallax, needed, noise_px));
   return h;
-}
-
-bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp,
-                            std::string* why) const {
-  // A window of two views is explained about as well by the scene's mirror in depth, and one that turns more than
-  // it moves (a pan, then the first steps) may even be explained a little better by the mirror: the tracks'
-  // errors are correlated along each track, and the test at the initialisation counts every observation as
-  // independent (rendered rotation scenario at 640x480, seed 1: the mirror won frames 3-41 by a chi-square of 51
-  // and the run was lost from frame 129 on with its orientations 126 deg off). The frames after it tell: three
-  // frames later the map as it was explained the settling window with a mean squared residual of 0.041 px^2 and
-  // its mirror with 0.019, twenty frames later 0.77 against 0.041.
-  if (window.size() < 3 || wp->pts.size() < 3) return false;
-  const Pose ref = cams->front();  // cam_from_world of the window's first camera (a copy: cams is rewritten)
-  // Judged on at most kFlipCheckFrames of the window, evenly spread (its first and last among them), and the
-  // points seen at least twice there: the whole settling window (up to 120 frames) took seconds a test on 7-Scenes.
-  const int n = static_cast<int>(window.size()), m = std::min(n, kFlipCheckFrames);
-  std::vector<int> sub;
-  for (int i = 0; i < m; ++i) sub.push_back(window[static_cast<size_t>(static_cast<int64_t>(i) * (n - 1) / (m - 1))]);
-  std::vector<Eigen::Vector3d> in_ref, sub_in_ref;
-  std::vector<int64_t> ids, sub_ids;
-  for (size_t i = 0; i < wp->pts.size(); ++i) {
-    const int64_t id = wp->pts[i]->id;
-    in_ref.push_back(ref * wp->X[i]), ids.push_back(id);
-    int views = 0;
-    for (int slot : sub) views += map_.frames[slot].Find(id) != nullptr;
-    if (views >= 2) sub_in_ref.push_back(in_ref.back()), sub_ids.push_back(id);
-  }
-  if (sub_ids.size() < 3) return false;
-  const std::optional<InitHypothesis> as_is = RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
-  const std::optional<InitHypothesis> sub_mirror =
-      RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false, true);
-  if (!as_is || !sub_mirror) return false;
-  // Counted by tracks, not by observations: a track's errors are correlated along it, so the points are what
-  // the window holds independently. Counted by observations, a 5-frame window of the rendered fast scenario
-  // (seed 3: 36 points, both fits at 1.2-1.3 px, the mirror's 22 % lower) flipped a right map by a chi-square
-  // of 49, and the run ended 60 cm off instead of 6; by its tracks that is 10, and the 640x480 rotation seeds
-  // 177 and 230.
-  const double chi2 =
-      (as_is->cost - sub_mirror->cost) * static_cast<double>(sub_ids.size()) / std::max(sub_mirror->cost, kCostFloorPx2);
-  if (!(chi2 >= options_.init.ambiguity_chi2)) return false;
-  // Taken: the whole window's mirror, placed and refined (once in a run that needs it).
-  const std::optional<InitHypothesis> mirror =
-      RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false, true);
-  if (!mirror) return false;
-  const Pose world_from_ref = ref.Inverse();
-  for (size_t w = 0; w < window.size(); ++w) (*cams)[w] = mirror->poses[w] * ref;
-  // RefineInitWindow keeps the points in the order given, which is wp's.
-  for (size_t i = 0; i < wp->X.size(); ++i) wp->X[i] = world_from_ref * mirror->points[i];
-  *why = fmt::format(
-      "the map was the mirror of the scene in depth: flipped (over {} frames and {} points its mirror explains the "
-      "views with a mean squared residual of {:.4f} px^2 against {:.4f}, a chi-square of {:.0f} over the tracks)",
-      sub.size(), sub_ids.size(), sub_mirror->cost, as_is->cost, chi2);
-  return true;
 }
 
 std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<int>& window,
