@@ -129,8 +129,8 @@ def main():
     except OSError:
         commit = "?"
     out = []
-    out.append("# Robustness matrix%s\n" % (": rendered with `%s`" % os.environ["SYNTH_FLAGS"].strip() if os.environ.get("SYNTH_FLAGS", "").strip() else ""))
     flags = os.environ.get("SYNTH_FLAGS", "").strip()
+    out.append("# Robustness matrix%s\n" % (": rendered with `%s`" % flags if flags else ""))
     if flags:
         # A variant of the matrix: every scenario rendered another way (another resolution, a lens).
         real = [n for n in names if n in REAL_NAMES]

@@ -196,9 +196,10 @@ bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, con
                     const Eigen::Vector3d& normal_in_world, Eigen::Vector2d* uv_px) {
   const Eigen::Vector3d center_in_world = cam_from_world.OriginOfTargetInSource();
   if (normal_in_world.dot(center_in_world - point_in_world) <= 0) return false;
+  const Eigen::Vector3d point_in_cam = cam_from_world * point_in_world;
   Eigen::Vector2d uv;
-  if (!camera.Project(cam_from_world * point_in_world, &uv, nullptr, kMinDepthM)) return false;
-  if (!camera.InImage(uv) || !RayLandsOnItsPixel(camera, cam_from_world * point_in_world, uv)) return false;
+  if (!camera.Project(point_in_cam, &uv, nullptr, kMinDepthM)) return false;
+  if (!camera.InImage(uv) || !RayLandsOnItsPixel(camera, point_in_cam, uv)) return false;
   if (uv_px) *uv_px = uv;
   return true;
 }

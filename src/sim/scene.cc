@@ -136,11 +136,10 @@ std::optional<QuadHit> QuadIntersector::Nearest(const Eigen::Vector3d& origin, c
 bool IsPointVisibleInScene(const PinholeCamera& camera, const Pose& cam_from_world, const QuadIntersector& scene,
                            const Eigen::Vector3d& point_in_world, const Eigen::Vector3d& normal_in_world,
                            Eigen::Vector2d* uv_px) {
-  const Eigen::Vector3d center_in_world = cam_from_world.OriginOfTargetInSource();
-  if (normal_in_world.dot(center_in_world - point_in_world) <= 0) return false;
+  // Facing the camera, in front of it and in its image (sim/paper_scenario.h), then not hidden.
   Eigen::Vector2d uv;
-  if (!camera.Project(cam_from_world * point_in_world, &uv, nullptr, kMinDepthM)) return false;
-  if (!camera.InImage(uv) || !RayLandsOnItsPixel(camera, cam_from_world * point_in_world, uv)) return false;
+  if (!IsPointVisible(camera, cam_from_world, point_in_world, normal_in_world, &uv)) return false;
+  const Eigen::Vector3d center_in_world = cam_from_world.OriginOfTargetInSource();
   // The ray from the centre reaches the point at t = 1; its own quad is met there, not before. The margin
   // keeps a quad sharing the point's edge (a coplanar neighbour) from hiding it by rounding.
   const Eigen::Vector3d dir = point_in_world - center_in_world;
