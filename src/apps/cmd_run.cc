@@ -175,6 +175,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
           spdlog::info("frame {}/{}", r.index + 1, input.frames.size()), progress_logged = r.index;
         if (r.initialisation && !r.note.empty() && !announced) spdlog::info("{}", r.note), announced = true;
         if (r.self_calibration) spdlog::info("frame {}: {}", r.index, r.note);
+        if (r.depth_reversed) spdlog::warn("frame {}: {}", r.index, r.note);
         // Log the changes of state, not every lost frame.
         const bool lost = r.status == slam::FrameStatus::kLost;
         if (lost && !was_lost) spdlog::warn("frame {} lost: {}", r.index, r.note);
@@ -231,8 +232,10 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   j["initialised"] = res.initialised;
   j["initialisation"] = nullptr;
   j["initialisation_rejections"] = nlohmann::json::array();
+  j["depth_reversals"] = nlohmann::json::array();
   for (const auto& r : res.reports) {
     if (r.init_rejected) j["initialisation_rejections"].push_back({{"frame", r.index}, {"why", r.note}});
+    if (r.depth_reversed) j["depth_reversals"].push_back({{"frame", r.index}, {"why", r.note}});
     if (r.initialisation && !r.note.empty() && j["initialisation"].is_null())
       j["initialisation"] = {{"frame", r.index}, {"note", r.note}};
   }

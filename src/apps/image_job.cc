@@ -287,6 +287,10 @@ void ImageRun::RunFrames() {
       lost += r.status == slam::FrameStatus::kLost;
       if (r.init_rejected) init_rejections.push_back({{"frame", r.index}, {"why", r.note}});
       if (r.self_calibration) progress.Clear(), spdlog::info("frame {}: {}", r.index, r.note);
+      if (r.depth_reversed) {
+        progress.Clear(), spdlog::warn("frame {}: {}", r.index, r.note);
+        depth_reversals.push_back({{"frame", r.index}, {"why", r.note}});
+      }
       if (r.initialisation && !r.note.empty() && !init_frame) {
         init_frame = r.index;
         init_note = r.note;

@@ -272,6 +272,7 @@ void ImageRun::WriteReport() {
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);
   j["initialisation_rejections"] = init_rejections;
+  j["depth_reversals"] = depth_reversals;
   j["self_calibration"] = SelfCalibrationJson(vslam->system().self_calibration());
   j["interrupted"] = interrupted;
   AddRunTimes(times, &j);

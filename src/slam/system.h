@@ -271,6 +271,9 @@ struct FrameReport {
   // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
   // ambiguity), as opposed to no initialisation being possible yet.
   bool init_rejected = false;
+  // The map was found, while it settled, to be the mirror of the scene in depth and was flipped (note says by
+  // how much the mirror explained the settling window better).
+  bool depth_reversed = false;
 };
 
 // The System's bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is
@@ -370,7 +373,8 @@ class System {
   // nullopt with *failure (when given) saying why.
   std::optional<InitHypothesis> RefineInitWindow(const std::vector<int>& window, const std::optional<Pose>& last_from_ref,
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
-                                                 std::string* failure, bool check_parallax = true) const;
+                                                 std::string* failure, bool check_parallax = true,
+                                                 bool dense_schur = false) const;
   // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
   // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
   // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).
@@ -407,6 +411,14 @@ class System {
   // is above the outlier threshold leaves the map. Returns how many left.
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   void Settle(int slot, std::vector<FrameReport>* out);
+  // The depth-reversal test of the initialisation, again over a settling window: the map as it is and its
+  // mirror in depth (in the window's first camera), each placed and refined over the window (the map's own
+  // adjusted fit counted too); when the mirror explains the window clearly better (InitOptions::ambiguity_chi2
+  // and kFlipCostRatio), *cams and wp->X become the mirror's (in the world frame, the first camera where it was)
+  // and *why says so.
+  bool FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp, std::string* why) const;
+  static constexpr int kFlipCheckFrames = 20;
+  static constexpr double kFlipCostRatio = 1.6;  // the map's cost over its mirror's needed to flip (and chi-square)
   // InitOptions::self_calibrate, on the settling's last window after its adjustment (cams, wp.X: adjusted): true
   // when the camera's k1 was replaced (every stored feature then undistorted again with it).
   static constexpr int kCalibrationFrames = 40;
