@@ -1,7 +1,8 @@
 // The System: its options' checks and the per-frame loop (Process). The stages live in their own files:
-// system_init.cc (§6.1: two-view initialisation, settling), system_track.cc (§5: the pose step, rotation-only
-// tracking, relocalisation), system_map.cc (§6.2-6.3: triangulation, Monte Carlo point adjustment, bundle
-// adjustment, the frame history).
+// system_init.cc (§6.1: two-view initialisation), system_settle.cc (the first map's settling), system_track.cc
+// (§5: the pose step, rotation-only tracking, relocalisation), system_map.cc (§6.2-6.3: triangulation, Monte
+// Carlo point adjustment, bundle adjustment, the frame history), system_bridge.cc (the provisional map after a
+// turn).
 #include "slam/system.h"
 
 #include <algorithm>

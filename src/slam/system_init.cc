@@ -1,5 +1,5 @@
 // The System's initialisation (paper §6.1): two views, the window refined by bundle adjustment, the
-// depth-reversal ambiguity test, frames before the reference, and the settling of the first map.
+// depth-reversal ambiguity test and frames before the reference. The settling of the first map: system_settle.cc.
 #include "slam/system.h"
 
 #include <algorithm>
@@ -25,39 +25,21 @@ namespace mcslam::slam {
 
 using detail::Ms;
 using detail::NoiseFromMedianResidualPx;
+using detail::kCostFloorPx2;
+using detail::MirrorInDepth;
 using detail::ParallaxForDepthNoiseDeg;
 
-System::WindowPoints System::CollectWindowPoints(const std::vector<int>& window) {
-  WindowPoints wp;
-  std::unordered_map<int64_t, int> count, index;
-  for (int s : window)
-    for (const FeatureUndistorted& f : map_.frames[s].features)
-      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
-  for (size_t w = 0; w < window.size(); ++w)
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
-      MapPoint* p = map_.Find(f.id);
-      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
-      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
-      if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world);
-      wp.obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
-    }
-  return wp;
-}
-
-int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index) {
-  std::vector<std::vector<double>> residuals(wp.pts.size());
-  for (const geometry::BundleObservation& o : wp.obs)
-    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], wp.X[o.point], o.uv_norm, focal_px_));
-  int removed = 0;
-  for (size_t i = 0; i < wp.pts.size(); ++i) {
-    wp.pts[i]->position_in_world = wp.X[i];
-    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > options_.mapping.adjust_threshold_px) {
-      wp.pts[i]->state = PointState::kRemoved;
-      wp.pts[i]->removed_frame = frame_index;
-      ++removed;
-    }
+std::vector<Eigen::Vector3d> detail::MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref) {
+  std::vector<double> z;
+  for (const Eigen::Vector3d& X : points_in_ref) z.push_back(X.z());
+  const double z0 = UpperMedian(z);
+  std::vector<Eigen::Vector3d> out;
+  out.reserve(points_in_ref.size());
+  for (const Eigen::Vector3d& X : points_in_ref) {
+    const double zm = std::max(2.0 * z0 - X.z(), 0.1 * z0);
+    out.push_back(X * (zm / X.z()));
   }
-  return removed;
+  return out;
 }
 
 System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
@@ -82,208 +64,6 @@ System::InitCounts System::NeededCounts(int cur_slot) const {
                                                  static_cast<double>(map_.frames[cur_slot].features.size())));
   auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
   return {lowered(io.min_common_features), lowered(io.min_inliers), lowered(io.min_points)};
-}
-
-void System::BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points) {
-  init_slot_ = init_slot;
-  init_baseline_ = baseline;
-  init_min_points_ = min_points;
-  settling_ = options_.init.settle_parallax_deg > 0;
-  next_settle_parallax_deg_ = options_.init.settle_step * std::max(two_view_parallax_deg, 1e-3);
-}
-
-double System::ParallaxFromReference(int slot) const {
-  const FrameRecord& ref = map_.frames[reference_slot_];
-  const FrameRecord& cur = map_.frames[slot];
-  const Pose pair[2] = {ref.cam_from_world, cur.cam_from_world};
-  std::vector<double> parallax;
-  for (const FeatureUndistorted& f : cur.features) {
-    const MapPoint* p = map_.Find(f.id);
-    if (!p || p->state == PointState::kRemoved || !ref.Find(f.id)) continue;
-    parallax.push_back(geometry::ParallaxDeg(pair, p->position_in_world));
-  }
-  // Too few points shared with the reference to say: the view has moved on, as far as the start can tell.
-  if (parallax.size() < static_cast<size_t>(init_min_points_)) return std::numeric_limits<double>::infinity();
-  return UpperMedian(parallax);
-}
-
-void System::Settle(int slot, std::vector<FrameReport>* out) {
-  const InitOptions& io = options_.init;
-  const double parallax = ParallaxFromReference(slot);
-  // Posed frames since the reference (at most settle_max_frames, evenly spread, with the reference, the
-  // initialisation's frame and this one), and every map point seen at least twice among them.
-  std::vector<int> posed;
-  for (int s = reference_slot_; s <= slot; ++s)
-    if (map_.frames[s].has_pose) posed.push_back(s);
-  std::vector<int> window;
-  const int n = static_cast<int>(posed.size()), m = std::min(n, io.settle_max_frames);
-  for (int i = 0; i < m; ++i) window.push_back(posed[static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)]);
-  if (std::find(window.begin(), window.end(), init_slot_) == window.end()) window.push_back(init_slot_);
-  std::sort(window.begin(), window.end());
-  window.erase(std::unique(window.begin(), window.end()), window.end());
-  std::vector<Pose> cams;
-  for (int s : window) cams.push_back(map_.frames[s].cam_from_world);
-  WindowPoints wp = CollectWindowPoints(window);
-  std::vector<bool> fixed(window.size(), false);
-  fixed.front() = true;  // the reference camera is the world
-  geometry::BundleAdjustOptions bo;
-  bo.focal_px = focal_px_;
-  bo.huber_px = io.refine_huber_px;
-  bo.cauchy = true;  // tens of frames of tracks hold wrong matches: their pull must fade
-  // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
-  // the same trajectory.
-  bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
-  geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
-  std::string reversal;
-  if (FlipIfMirrored(window, &cams, &wp, &reversal)) geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
-  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !self_calibration_.tried &&
-      SelfCalibrate(window, cams, wp, slot)) {
-    // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
-    std::vector<Eigen::Vector3d> adjusted = std::move(wp.X);
-    wp = CollectWindowPoints(window);
-    wp.X = std::move(adjusted);
-    geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
-  }
-  std::vector<Eigen::Vector3d>& X = wp.X;
-  // The scale: the initialisation's baseline keeps its length (1, or the ground truth's with --gt-scale).
-  const auto init_it = std::find(window.begin(), window.end(), init_slot_);
-  const double b = init_it == window.end()
-                       ? 0.0
-                       : (cams[init_it - window.begin()].OriginOfTargetInSource() - cams.front().OriginOfTargetInSource()).norm();
-  const double s = b > 1e-12 ? init_baseline_ / b : 1.0;
-  // Scaled about the reference camera's centre, which stays where it is: the world's origin after the
-  // initialisation (the expressions below are then exactly t * s and x * s), the anchor's centre in a provisional
-  // map (SystemOptions::bridge). A camera x_c = q X + t seeing the world scaled about c0 sees x_c * s.
-  const Eigen::Vector3d c0 = cams.front().OriginOfTargetInSource();
-  for (Pose& c : cams) c.t = s * c.t + (s - 1.0) * (c.q * c0);
-  for (Eigen::Vector3d& x : X) x = c0 + s * (x - c0);
-  std::unordered_map<int, Pose> moved_by;  // window slot -> new * old^-1
-  for (size_t w = 0; w < window.size(); ++w) {
-    moved_by[window[w]] = cams[w] * map_.frames[window[w]].cam_from_world.Inverse();
-    map_.frames[window[w]].cam_from_world = cams[w];
-  }
-  const FrameRecord& cur = map_.frames[slot];
-  StoreAdjustedPoints(cams, wp, cur.index);
-  RefreshInlierFlags(slot);  // at the moved current pose
-  // The posed frames left out of the adjustment, and those before the reference: each placed again against
-  // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
-  // was first placed with), or else moved with its neighbour in the window: for a frame before the
-  // reference, which stays the world, only the scale changes.
-  std::vector<int> left_out;
-  for (int k = posed_from_; k < reference_slot_; ++k) left_out.push_back(k);
-  for (int k : posed)
-    if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
-  for (int k : left_out) {
-    FrameRecord& f = map_.frames[k];
-    const bool before_reference = k < reference_slot_;
-    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers,
-                                                    before_reference ? options_.tracker.min_inlier_ratio : 0.0)) {
-      f.cam_from_world = *pose;
-    } else if (before_reference) {
-      f.cam_from_world.t *= s;
-    } else {
-      f.cam_from_world = moved_by[*(std::upper_bound(window.begin(), window.end(), k) - 1)] * f.cam_from_world;
-    }
-  }
-  std::string note = fmt::format(
-      "{}: {} of {} frames and {} points refined together at a median parallax of {:.1f} deg",
-      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(), parallax);
-  if (self_calibration_.tried && self_calibration_.frame == cur.index) {
-    note += "; " + self_calibration_.note;
-    out->front().self_calibration = true;
-  }
-  if (!reversal.empty()) {
-    note += "; " + reversal;
-    out->front().depth_reversed = true;
-  }
-  settling_ = parallax < io.settle_parallax_deg;
-  next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
-  out->front().cam_from_world = cur.cam_from_world;
-  out->front().note = note;
-  ResidualStats(slot, &out->front());
-  for (int k = posed_from_; k <= slot; ++k) {
-    if (k == slot || !map_.frames[k].has_pose) continue;
-    FrameReport r = PosedReport(k);
-    r.pose_update = true;
-    out->push_back(r);
-  }
-}
-
-namespace {
-
-// The pixel at which `camera` sees the ray through undistorted normalised coordinates n (distortion applied).
-Eigen::Vector2d SeenPixel(const PinholeCamera& camera, const Eigen::Vector2d& n) {
-  return camera.NormalizedToPixel(camera.HasDistortion() ? camera.Distort(n) : n);
-}
-
-// The pixel that `to` undistorts a feature to, when `from` undistorted it to uv_px (same K, other distortion).
-Eigen::Vector2d Reundistort(const PinholeCamera& from, const PinholeCamera& to, const Eigen::Vector2d& uv_px) {
-  return to.UndistortPixel(SeenPixel(from, from.PixelToNormalized(uv_px)));
-}
-
-}  // namespace
-
-bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pose>& cams, const WindowPoints& wp,
-                           int slot) {
-  const InitOptions& io = options_.init;
-  SelfCalibration& c = self_calibration_;
-  c.tried = true;
-  c.frame = map_.frames[slot].index;
-  c.k1_given = c.k1_measured = camera_.dist.k1;
-  // At most kCalibrationFrames of the window, evenly spread (its first frame, the reference, among them): the
-  // adjustment's cost grows with the observations, and neighbouring frames of the same tracks add little.
-  const int n = static_cast<int>(window.size()), m = std::min(n, kCalibrationFrames);
-  std::vector<int> camera_of(window.size(), -1);  // window position -> calibration camera
-  std::vector<Pose> sub_cams;
-  std::vector<bool> fixed;
-  for (int i = 0; i < m; ++i) {
-    const int w = static_cast<int>(static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1));
-    if (camera_of[w] >= 0) continue;
-    camera_of[w] = static_cast<int>(sub_cams.size());
-    sub_cams.push_back(cams[w]);
-    fixed.push_back(sub_cams.size() <= 2);  // the gauge and the scale: the first two frames taken
-  }
-  // Points seen at least twice among them, and their observations as the camera saw them (distorted pixels).
-  std::vector<int> seen(wp.X.size(), 0);
-  for (const geometry::BundleObservation& o : wp.obs) seen[o.point] += camera_of[o.camera] >= 0;
-  std::vector<int> point_of(wp.X.size(), -1);
-  std::vector<Eigen::Vector3d> X;
-  std::vector<geometry::PixelObservation> obs;
-  for (const geometry::BundleObservation& o : wp.obs) {
-    if (camera_of[o.camera] < 0 || seen[o.point] < 2) continue;
-    if (point_of[o.point] < 0) point_of[o.point] = static_cast<int>(X.size()), X.push_back(wp.X[o.point]);
-    obs.push_back({camera_of[o.camera], point_of[o.point], SeenPixel(camera_, o.uv_norm)});
-  }
-  geometry::IntrinsicsOptions co;
-  co.loss_px = io.refine_huber_px;
-  co.free_focal = false;
-  co.num_threads = 1;  // the same seed, the same result
-  const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(camera_, sub_cams, X, obs, fixed, co);
-  c.frames = static_cast<int>(sub_cams.size());
-  c.points = static_cast<int>(X.size());
-  c.observations = fit.observations;
-  c.k1_measured = fit.camera.dist.k1;
-  c.sigma_k1 = fit.sigma_k1;
-  c.z = std::sqrt(fit.chi2);
-  c.corner_shift_px = 0;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera_.width - 1, 0),
-                                       Eigen::Vector2d(0, camera_.height - 1),
-                                       Eigen::Vector2d(camera_.width - 1, camera_.height - 1)})
-    c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - camera_.UndistortPixel(corner)).norm());
-  c.accepted = std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
-               c.corner_shift_px >= io.calibration_min_shift_px;
-  c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
-                       "the farthest corner): {}",
-                       c.accepted ? "self-calibrated" : "checked", c.frames, c.points, c.k1_measured, c.sigma_k1, c.z,
-                       c.corner_shift_px,
-                       c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
-                                  : fmt::format("k1 {:g} kept", c.k1_given));
-  if (!c.accepted) return false;
-  const PinholeCamera given = camera_;
-  camera_.dist.k1 = c.k1_measured;
-  for (FrameRecord& f : map_.frames)
-    for (FeatureUndistorted& u : f.features) u.uv_px = Reundistort(given, camera_, u.uv_px);
-  return true;
 }
 
 geometry::PnpOptions System::TrackerPnpOptions(int min_inliers) const {
@@ -323,28 +103,10 @@ int System::PoseFramesBefore(int before_slot, int first_slot) {
 
 namespace {
 
-// The points mirrored in depth about their median depth along the reference camera's axis, each kept on its
-// ray (so the reference view is unchanged): the start of the depth-reversed twin of a two-view solution.
-std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref) {
-  std::vector<double> z;
-  for (const Eigen::Vector3d& X : points_in_ref) z.push_back(X.z());
-  const double z0 = UpperMedian(z);
-  std::vector<Eigen::Vector3d> out;
-  out.reserve(points_in_ref.size());
-  for (const Eigen::Vector3d& X : points_in_ref) {
-    const double zm = std::max(2.0 * z0 - X.z(), 0.1 * z0);
-    out.push_back(X * (zm / X.z()));
-  }
-  return out;
-}
-
 // Two refined initialisations are the same solution when their points' depths correlate at least this much
-// and their last cameras' orientations agree within kSameRotationDeg; the noise variance of the ambiguity test
-// is at least kCostFloorPx2 (a residual of 0.03 px), so that two exact fits of clean data do not count as a
-// clear winner and loser.
+// and their last cameras' orientations agree within kSameRotationDeg.
 constexpr double kSameStructureCorrelation = 0.9;
 constexpr double kSameRotationDeg = 2.0;
-constexpr double kCostFloorPx2 = 1e-3;
 
 // Pearson correlation of the depths (z) of the points two reconstructions share (by id): about -1 for a
 // depth-reversed pair, about +1 for the same structure; 1 when they share fewer than 3 points.
@@ -439,84 +201,6 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
                             "asks for it)",
                             refined_parallax, needed, noise_px));
   return h;
-}
-
-bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp,
-                            std::string* why) const {
-  // A window of two views is explained about as well by the scene's mirror in depth, and one that turns more than
-  // it moves (a pan, then the first steps) may even be explained a little better by the mirror: the tracks'
-  // errors are correlated along each track, and the test at the initialisation counts every observation as
-  // independent (rendered rotation scenario at 640x480, seed 1: the mirror won frames 3-41 by a chi-square of 51
-  // and the run was lost from frame 129 on with its orientations 126 deg off). The frames after it tell: three
-  // frames later the map as it was explained the settling window with a mean squared residual of 0.041 px^2 and
-  // its mirror with 0.019, twenty frames later 0.77 against 0.041.
-  if (window.size() < 3 || wp->pts.size() < 3) return false;
-  const Pose ref = cams->front();  // cam_from_world of the window's first camera (a copy: cams is rewritten)
-  // Judged on at most kFlipCheckFrames of the window, evenly spread (its first and last among them), and the
-  // points seen at least twice there: the whole settling window (up to 120 frames) took seconds a test on 7-Scenes.
-  const int n = static_cast<int>(window.size()), m = std::min(n, kFlipCheckFrames);
-  std::vector<int> sub;
-  std::vector<bool> in_sub(window.size(), false);
-  for (int i = 0; i < m; ++i) {
-    const size_t w = static_cast<size_t>(static_cast<int64_t>(i) * (n - 1) / (m - 1));
-    sub.push_back(window[w]), in_sub[w] = true;
-  }
-  std::vector<Eigen::Vector3d> in_ref, sub_in_ref;
-  std::vector<int64_t> ids, sub_ids;
-  std::vector<bool> judged(wp->pts.size(), false);
-  for (size_t i = 0; i < wp->pts.size(); ++i) {
-    const int64_t id = wp->pts[i]->id;
-    in_ref.push_back(ref * wp->X[i]), ids.push_back(id);
-    int views = 0;
-    for (int slot : sub) views += map_.frames[slot].Find(id) != nullptr;
-    if (views >= 2) sub_in_ref.push_back(in_ref.back()), sub_ids.push_back(id), judged[i] = true;
-  }
-  if (sub_ids.size() < 3) return false;
-  const std::optional<InitHypothesis> as_is = RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
-  const std::optional<InitHypothesis> sub_mirror =
-      RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false, true);
-  if (!as_is || !sub_mirror) return false;
-  // The map as it is needs no new placement: the settling's adjustment has just fitted it to the whole window, and
-  // its cost over the frames judged is a fit the placement from scratch may miss (PnP through 10 % outliers and a
-  // descent from there: 2.98 px^2 on the noisy paper scenario's first 16 frames, where the adjusted map fits them at
-  // 2.79). The lower of the two is the map's fit.
-  const double cap_sq = options_.mapping.max_reprojection_px * options_.mapping.max_reprojection_px;
-  double settled_sum = 0;
-  int settled_n = 0;
-  for (const geometry::BundleObservation& o : wp->obs) {
-    if (!in_sub[static_cast<size_t>(o.camera)] || !judged[static_cast<size_t>(o.point)]) continue;
-    const double r = geometry::ReprojectionErrorPx((*cams)[static_cast<size_t>(o.camera)],
-                                                   wp->X[static_cast<size_t>(o.point)], o.uv_norm, focal_px_);
-    settled_sum += std::min(r * r, cap_sq), ++settled_n;
-  }
-  const double as_is_cost = settled_n > 0 ? std::min(as_is->cost, settled_sum / settled_n) : as_is->cost;
-  // Counted by tracks, not by observations: a track's errors are correlated along it, so the points are what
-  // the window holds independently. Counted by observations, a 5-frame window of the rendered fast scenario
-  // (seed 3: 36 points, both fits at 1.2-1.3 px, the mirror's 22 % lower) flipped a right map by a chi-square
-  // of 49, and the run ended 60 cm off instead of 6; by its tracks that is 10, and the 640x480 rotation seeds
-  // 177 and 230.
-  const double chi2 =
-      (as_is_cost - sub_mirror->cost) * static_cast<double>(sub_ids.size()) / std::max(sub_mirror->cost, kCostFloorPx2);
-  // And by how much: the chi-square is not calibrated where the tracks' errors are correlated and a tenth of them
-  // are outliers (the noisy paper scenario, 1 px and 10 %, 16 frames at 5.2 deg under clang's rounding: the
-  // adjusted map 2.79 px^2, its mirror 2.47, a chi-square of 22 for a right map; the fast scenario's 5-frame
-  // window above: 1.28x). A mirror that is the scene leaves the map's fit far above the noise it fits at itself
-  // (the 640x480 rotation seeds: 2.2x and 2.15x, 20 frames later 19x), so the mirror must also fit at most
-  // kFlipCostRatio of the map's cost; a smaller lead waits for the next settling step's longer window.
-  if (!(chi2 >= options_.init.ambiguity_chi2) || !(as_is_cost >= kFlipCostRatio * sub_mirror->cost)) return false;
-  // Taken: the whole window's mirror, placed and refined (once in a run that needs it).
-  const std::optional<InitHypothesis> mirror =
-      RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false, true);
-  if (!mirror) return false;
-  const Pose world_from_ref = ref.Inverse();
-  for (size_t w = 0; w < window.size(); ++w) (*cams)[w] = mirror->poses[w] * ref;
-  // RefineInitWindow keeps the points in the order given, which is wp's.
-  for (size_t i = 0; i < wp->X.size(); ++i) wp->X[i] = world_from_ref * mirror->points[i];
-  *why = fmt::format(
-      "the map was the mirror of the scene in depth: flipped (over {} frames and {} points its mirror explains the "
-      "views with a mean squared residual of {:.4f} px^2 against {:.4f}, a chi-square of {:.0f} over the tracks)",
-      sub.size(), sub_ids.size(), sub_mirror->cost, as_is_cost, chi2);
-  return true;
 }
 
 std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<int>& window,

@@ -1,10 +1,12 @@
 #pragma once
-// Helpers shared by the System's stage files (system.cc, system_init.cc, system_track.cc, system_map.cc);
-// not part of the slam layer's interface.
+// Helpers shared by the System's stage files (system.cc, system_init.cc, system_settle.cc, system_track.cc,
+// system_map.cc, system_bridge.cc); not part of the slam layer's interface.
 #include <chrono>
 #include <future>
 #include <string>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "core/pose.h"
 #include "geometry/bundle_adjust.h"
@@ -25,6 +27,14 @@ inline double ParallaxForDepthNoiseDeg(double noise_px, double focal_px, double 
 // for the provisional map to join the map (System::JoinBridge): the provisional map's orientation is anchored to
 // the map's at the turn and drifts little while it lasts; its scale is what the join finds.
 constexpr double kJoinMaxRotationDeg = 5.0;
+
+// The points mirrored in depth about their median depth along the reference camera's axis, each kept on its
+// ray (so the reference view is unchanged): the start of the depth-reversed twin of a two-view solution or map.
+std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref);
+
+// The noise variance of the depth-reversal tests is at least this (px^2: a residual of 0.03 px), so that two
+// exact fits of clean data do not count as a clear winner and loser.
+constexpr double kCostFloorPx2 = 1e-3;
 
 inline double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
