@@ -156,8 +156,11 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
     }
   }
   std::string note = fmt::format(
-      "{}: {} of {} frames and {} points refined together at a median parallax of {:.1f} deg",
-      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(), parallax);
+      "{}: {} of {} frames and {} points refined together {}",
+      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(),
+      std::isfinite(parallax) ? fmt::format("at a median parallax of {:.1f} deg", parallax)
+                              : fmt::format("as the view moved on (fewer than {} of the reference's points in view)",
+                                            init_min_points_));
   if (self_calibration_.tried && self_calibration_.frame == cur.index) {
     note += "; " + self_calibration_.note;
     out->front().self_calibration = true;
