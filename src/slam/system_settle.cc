@@ -172,6 +172,10 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   settling_ = parallax < io.settle_parallax_deg;
   next_settle_parallax_deg_ = std::min(parallax * io.settle_step, io.settle_parallax_deg);
   out->front().cam_from_world = cur.cam_from_world;
+  // A flipped map moved every pose far from where the smoother's state is (the 640x480 rotation seed 1: the
+  // frame's smoothed pose 7 deg from its flipped one, the next 2 deg): it starts again there, as after a
+  // relocalisation.
+  if (!reversal.empty()) smoother_.Reset(), out->front().smoothed_cam_from_world = smoother_.Update(cur.cam_from_world);
   out->front().note = note;
   ResidualStats(slot, &out->front());
   for (int k = posed_from_; k <= slot; ++k) {
