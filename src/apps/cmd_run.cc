@@ -423,7 +423,8 @@ void RegisterRun(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--starving-inliers", args->system.mapping.starving_inliers,
                   "Keyframes with fewer pose inliers than this take new points from 2 degrees of parallax whatever "
-                  "--min-parallax-deg says, so that the map does not run dry (0: off)")
+                  "--min-parallax-deg says, and from tracks seen in 2 posed frames instead of 3, so that the map "
+                  "does not run dry (0: off)")
       ->check(NonNegative())
       ->capture_default_str();
   cmd->add_flag("--no-provisional-map{false}", args->system.bridge,

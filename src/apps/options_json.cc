@@ -33,6 +33,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_d
                                                 calibration_min_shift_px)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames, min_parallax_deg,
                                                 max_relative_depth_noise, max_noise_parallax_deg, starving_inliers,
+                                                starving_min_track_frames,
                                                 starving_parallax_deg, max_reprojection_px, retriangulate_after_frames,
                                                 history_frames, adjust, adjust_threshold_px, candidate_threshold_px,
                                                 samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px,

@@ -99,6 +99,8 @@ void MappingOptions::Check() const {
   if (!(max_noise_parallax_deg >= 0 && max_noise_parallax_deg < 90))
     Fail(fmt::format("mapping: max_noise_parallax_deg must be in [0, 90), got {}", max_noise_parallax_deg));
   if (starving_inliers < 0) Fail(fmt::format("mapping: starving_inliers must be >= 0, got {}", starving_inliers));
+  if (starving_min_track_frames < 2)
+    Fail(fmt::format("mapping: starving_min_track_frames must be >= 2, got {}", starving_min_track_frames));
   if (!(starving_parallax_deg >= 0))
     Fail(fmt::format("mapping: starving_parallax_deg must be >= 0, got {}", starving_parallax_deg));
   if (!(max_reprojection_px > 0)) Fail(fmt::format("mapping: max_reprojection_px must be > 0, got {}", max_reprojection_px));

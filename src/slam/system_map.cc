@@ -57,7 +57,9 @@ int System::TriangulateNewPoints(int slot, int inliers) {
   noise_parallax_deg_ = std::min(ParallaxForDepthNoiseDeg(noise_px, focal_px_, mo.max_relative_depth_noise),
                                  mo.max_noise_parallax_deg);
   const double wanted = std::max(mo.min_parallax_deg, noise_parallax_deg_);
-  to.min_parallax_deg = inliers < mo.starving_inliers ? std::min(wanted, mo.starving_parallax_deg) : wanted;
+  const bool starving = inliers < mo.starving_inliers;
+  to.min_parallax_deg = starving ? std::min(wanted, mo.starving_parallax_deg) : wanted;
+  const int min_views = starving ? std::min(mo.min_track_frames, mo.starving_min_track_frames) : mo.min_track_frames;
   int added = 0;
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* existing = map_.Find(f.id);
@@ -69,7 +71,7 @@ int System::TriangulateNewPoints(int slot, int inliers) {
     for (auto it = std::lower_bound(map_.keyframes.begin(), map_.keyframes.end(), pruned_until_);
          it != map_.keyframes.end(); ++it)
       if (map_.frames[*it].has_pose && map_.frames[*it].Find(f.id)) seen.push_back(*it);
-    if (static_cast<int>(seen.size()) < mo.min_track_frames) continue;
+    if (static_cast<int>(seen.size()) < min_views) continue;
     // Robust linear triangulation: a point from each of a few view pairs (first-current, and pairs that
     // skip the first or the current view in case a wrong match sits there), the views that agree with it
     // within the reprojection threshold counted, and the best pair's agreeing views triangulated together.
@@ -95,7 +97,7 @@ int System::TriangulateNewPoints(int slot, int inliers) {
       }
       if (agree.size() > best_views.size()) best_views = agree;
     }
-    if (static_cast<int>(best_views.size()) < mo.min_track_frames) continue;
+    if (static_cast<int>(best_views.size()) < min_views) continue;
     std::vector<Pose> poses;
     std::vector<Eigen::Vector2d> uv;
     for (int k : best_views) {

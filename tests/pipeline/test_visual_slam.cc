@@ -14,6 +14,7 @@
 #include "eval/trajectory_eval.h"
 #include "pipeline/visual_slam.h"
 #include "sim/paper_scenario.h"
+#include "sim/scenarios.h"
 #include "sim/render.h"
 
 namespace mcslam::pipeline {
@@ -32,6 +33,19 @@ struct Scene {
   sim::SyntheticSequence seq;
   sim::SceneRenderer renderer{sim::RenderOptions{}};
   Scene(int frames, uint64_t seed) : seq(PaperScene(frames, seed)) {}
+  // A scenario of the zoo rendered as `mcslam synth --scenario NAME --seed SEED --render` renders it.
+  Scene(const std::string& name, uint64_t seed) : seq(Scenario(name, seed)), renderer(seq.scene, Textures(seed)) {}
+  static sim::SyntheticSequence Scenario(const std::string& name, uint64_t seed) {
+    sim::ScenarioOptions so;
+    so.name = name;
+    so.seed = seed;
+    return sim::MakeScenario(so);
+  }
+  static sim::RenderOptions Textures(uint64_t seed) {
+    sim::RenderOptions ro;
+    ro.seed = seed;
+    return ro;
+  }
   cv::Mat Frame(int i) const {
     return renderer.Render(seq.camera, seq.cam_from_world[static_cast<size_t>(i)], static_cast<uint64_t>(i));
   }
@@ -116,6 +130,43 @@ TEST(VisualSlam, AFrameAfterAGapOfUnreadableFramesIsRelocalisedAndTracked) {
     ASSERT_TRUE(errors.count(kGapEnd));
     EXPECT_LT(errors.at(kGapEnd), 0.06);
     EXPECT_LT(worst_after, 0.11);
+  }
+}
+
+// MappingOptions::starving_min_track_frames. Under the fast scenario's motion most tracks live three or four
+// frames; a map whose keyframes have fewer than 30 pose inliers (starving) takes new points from tracks seen in
+// two posed frames instead of three, or it keeps too few of what is in view to survive a jolt. Measured here
+// (seeds 1-10, ~5 s each): no frame lost on any seed; with three views seed 2 loses 14 (frames 18-31, after a
+// 7 deg jolt left 7 map points in view). `mcslam run` (its local adjustment on its own thread) lost 0-2 frames
+// on seeds 1-10. The bound: three lost frames a seed, the most the CLI lost plus one; the three-view run's 14
+// sits far beyond it. Seeds 1-3 and 6 (6 the one the CLI lost most on).
+constexpr uint64_t kFastSeeds[] = {1, 2, 3, 6};
+constexpr int kMaxLost = 3;
+TEST(VisualSlam, AStarvingMapTakesNewPointsFromTwoViewsSoFastMotionDoesNotLoseIt) {
+  auto lost_after_init = [](const Scene& scene, int min_views) {
+    VisualSlamOptions options;
+    options.system.mapping.starving_min_track_frames = min_views;
+    VisualSlam vs(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+    Reports reports;
+    const int frames = static_cast<int>(scene.seq.cam_from_world.size());
+    for (int i = 0; i < frames; ++i) Keep(vs.Process(scene.Frame(i), i, i / kFps), &reports);
+    for (const slam::FrameReport& r : vs.Finish()) reports[r.index] = r;
+    int lost = 0;
+    for (const auto& [i, r] : reports) lost += r.status == slam::FrameStatus::kLost;
+    return lost;
+  };
+  for (uint64_t seed : kFastSeeds) {
+    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    const Scene scene("fast", seed);
+    const int lost = lost_after_init(scene, 2);
+    std::printf("[ fast     ] seed %llu: %d frames lost (two views when starving)\n",
+                static_cast<unsigned long long>(seed), lost);
+    EXPECT_LE(lost, kMaxLost);
+    if (seed == 2) {
+      const int lost3 = lost_after_init(scene, 3);
+      std::printf("[ fast     ] seed 2: %d frames lost (three views)\n", lost3);
+      EXPECT_GE(lost3, 10);
+    }
   }
 }
 
