@@ -42,6 +42,21 @@ std::vector<Eigen::Vector3d> detail::MirrorInDepth(const std::vector<Eigen::Vect
   return out;
 }
 
+std::vector<int> detail::EvenlySpread(int n, int m) {
+  m = std::min(n, m);
+  std::vector<int> out;
+  for (int i = 0; i < m; ++i) out.push_back(static_cast<int>(static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)));
+  return out;
+}
+
+double detail::CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px) {
+  if (residuals_px.empty()) return std::numeric_limits<double>::infinity();
+  const double cap_sq = cap_px * cap_px;
+  double sum = 0;
+  for (double r : residuals_px) sum += std::min(r * r, cap_sq);
+  return sum / static_cast<double>(residuals_px.size());
+}
+
 System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
   Correspondences c;
   const FrameRecord& ref = map_.frames[ref_slot];
@@ -173,14 +188,10 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   bo.dense_schur = dense_schur;
   if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
   std::vector<double> res;
-  double cost = 0;
-  const double cap_sq = options_.mapping.max_reprojection_px * options_.mapping.max_reprojection_px;
-  for (const geometry::BundleObservation& o : obs) {
+  for (const geometry::BundleObservation& o : obs)
     res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
-    cost += std::min(res.back() * res.back(), cap_sq);
-  }
   h.median_px = UpperMedian(res);
-  h.cost = obs.empty() ? std::numeric_limits<double>::infinity() : cost / static_cast<double>(obs.size());
+  h.cost = detail::CappedMeanSquarePx2(res, options_.mapping.max_reprojection_px);
   h.observations = static_cast<int>(obs.size());
   std::vector<double> z;
   for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());

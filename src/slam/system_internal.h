@@ -32,6 +32,14 @@ constexpr double kJoinMaxRotationDeg = 5.0;
 // ray (so the reference view is unchanged): the start of the depth-reversed twin of a two-view solution or map.
 std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref);
 
+// m of n positions 0..n-1, evenly spread and strictly increasing, the first and (for m >= 2) the last among
+// them: i (n - 1) / (m - 1) for i < m. All n when m >= n. The frames a long window is judged or refined on.
+std::vector<int> EvenlySpread(int n, int m);
+
+// The mean over `residuals_px` of min(r^2, cap_px^2) (px^2): a window's fit, each wrong match counted at most
+// the cap; infinity for none.
+double CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px);
+
 // The noise variance of the depth-reversal tests is at least this (px^2: a residual of 0.03 px), so that two
 // exact fits of clean data do not count as a clear winner and loser.
 constexpr double kCostFloorPx2 = 1e-3;

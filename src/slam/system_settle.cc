@@ -18,6 +18,8 @@
 
 namespace mcslam::slam {
 
+using detail::CappedMeanSquarePx2;
+using detail::EvenlySpread;
 using detail::kCostFloorPx2;
 using detail::MirrorInDepth;
 
@@ -54,6 +56,19 @@ int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoint
   return removed;
 }
 
+namespace {
+
+// Per point (of `points`), its observations in the window's frames that `among` maps to a position (>= 0).
+std::vector<int> ViewsAmong(const std::vector<geometry::BundleObservation>& obs, size_t points,
+                            const std::vector<int>& among) {
+  std::vector<int> views(points, 0);
+  for (const geometry::BundleObservation& o : obs)
+    views[static_cast<size_t>(o.point)] += among[static_cast<size_t>(o.camera)] >= 0;
+  return views;
+}
+
+}  // namespace
+
 void System::BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points) {
   init_slot_ = init_slot;
   init_baseline_ = baseline;
@@ -86,8 +101,7 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   for (int s = reference_slot_; s <= slot; ++s)
     if (map_.frames[s].has_pose) posed.push_back(s);
   std::vector<int> window;
-  const int n = static_cast<int>(posed.size()), m = std::min(n, io.settle_max_frames);
-  for (int i = 0; i < m; ++i) window.push_back(posed[static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)]);
+  for (int i : EvenlySpread(static_cast<int>(posed.size()), io.settle_max_frames)) window.push_back(posed[i]);
   if (std::find(window.begin(), window.end(), init_slot_) == window.end()) window.push_back(init_slot_);
   std::sort(window.begin(), window.end());
   window.erase(std::unique(window.begin(), window.end()), window.end());
@@ -209,20 +223,16 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   c.k1_given = c.k1_measured = camera_.dist.k1;
   // At most kCalibrationFrames of the window, evenly spread (its first frame, the reference, among them): the
   // adjustment's cost grows with the observations, and neighbouring frames of the same tracks add little.
-  const int n = static_cast<int>(window.size()), m = std::min(n, kCalibrationFrames);
   std::vector<int> camera_of(window.size(), -1);  // window position -> calibration camera
   std::vector<Pose> sub_cams;
   std::vector<bool> fixed;
-  for (int i = 0; i < m; ++i) {
-    const int w = static_cast<int>(static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1));
-    if (camera_of[w] >= 0) continue;
+  for (int w : EvenlySpread(static_cast<int>(window.size()), kCalibrationFrames)) {
     camera_of[w] = static_cast<int>(sub_cams.size());
     sub_cams.push_back(cams[w]);
     fixed.push_back(sub_cams.size() <= 2);  // the gauge and the scale: the first two frames taken
   }
   // Points seen at least twice among them, and their observations as the camera saw them (distorted pixels).
-  std::vector<int> seen(wp.X.size(), 0);
-  for (const geometry::BundleObservation& o : wp.obs) seen[o.point] += camera_of[o.camera] >= 0;
+  const std::vector<int> seen = ViewsAmong(wp.obs, wp.X.size(), camera_of);
   std::vector<int> point_of(wp.X.size(), -1);
   std::vector<Eigen::Vector3d> X;
   std::vector<geometry::PixelObservation> obs;
@@ -276,22 +286,16 @@ bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* c
   const Pose ref = cams->front();  // cam_from_world of the window's first camera (a copy: cams is rewritten)
   // Judged on at most kFlipCheckFrames of the window, evenly spread (its first and last among them), and the
   // points seen at least twice there: the whole settling window (up to 120 frames) took seconds a test on 7-Scenes.
-  const int n = static_cast<int>(window.size()), m = std::min(n, kFlipCheckFrames);
   std::vector<int> sub;
-  std::vector<bool> in_sub(window.size(), false);
-  for (int i = 0; i < m; ++i) {
-    const size_t w = static_cast<size_t>(static_cast<int64_t>(i) * (n - 1) / (m - 1));
-    sub.push_back(window[w]), in_sub[w] = true;
-  }
+  std::vector<int> sub_of(window.size(), -1);  // window position -> position among those judged
+  for (int w : EvenlySpread(static_cast<int>(window.size()), kFlipCheckFrames))
+    sub_of[w] = static_cast<int>(sub.size()), sub.push_back(window[w]);
+  const std::vector<int> views = ViewsAmong(wp->obs, wp->X.size(), sub_of);
   std::vector<Eigen::Vector3d> in_ref, sub_in_ref;
   std::vector<int64_t> ids, sub_ids;
-  std::vector<bool> judged(wp->pts.size(), false);
   for (size_t i = 0; i < wp->pts.size(); ++i) {
-    const int64_t id = wp->pts[i]->id;
-    in_ref.push_back(ref * wp->X[i]), ids.push_back(id);
-    int views = 0;
-    for (int slot : sub) views += map_.frames[slot].Find(id) != nullptr;
-    if (views >= 2) sub_in_ref.push_back(in_ref.back()), sub_ids.push_back(id), judged[i] = true;
+    in_ref.push_back(ref * wp->X[i]), ids.push_back(wp->pts[i]->id);
+    if (views[i] >= 2) sub_in_ref.push_back(in_ref.back()), sub_ids.push_back(ids.back());
   }
   if (sub_ids.size() < 3) return false;
   const std::optional<InitHypothesis> as_is = RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
@@ -302,16 +306,14 @@ bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* c
   // its cost over the frames judged is a fit the placement from scratch may miss (PnP through 10 % outliers and a
   // descent from there: 2.98 px^2 on the noisy paper scenario's first 16 frames, where the adjusted map fits them at
   // 2.79). The lower of the two is the map's fit.
-  const double cap_sq = options_.mapping.max_reprojection_px * options_.mapping.max_reprojection_px;
-  double settled_sum = 0;
-  int settled_n = 0;
-  for (const geometry::BundleObservation& o : wp->obs) {
-    if (!in_sub[static_cast<size_t>(o.camera)] || !judged[static_cast<size_t>(o.point)]) continue;
-    const double r = geometry::ReprojectionErrorPx((*cams)[static_cast<size_t>(o.camera)],
-                                                   wp->X[static_cast<size_t>(o.point)], o.uv_norm, focal_px_);
-    settled_sum += std::min(r * r, cap_sq), ++settled_n;
-  }
-  const double as_is_cost = settled_n > 0 ? std::min(as_is->cost, settled_sum / settled_n) : as_is->cost;
+  std::vector<double> settled;
+  for (const geometry::BundleObservation& o : wp->obs)
+    if (sub_of[static_cast<size_t>(o.camera)] >= 0 && views[static_cast<size_t>(o.point)] >= 2)
+      settled.push_back(geometry::ReprojectionErrorPx((*cams)[static_cast<size_t>(o.camera)],
+                                                      wp->X[static_cast<size_t>(o.point)], o.uv_norm, focal_px_));
+  const double as_is_cost =
+      settled.empty() ? as_is->cost
+                      : std::min(as_is->cost, CappedMeanSquarePx2(settled, options_.mapping.max_reprojection_px));
   // Counted by tracks, not by observations: a track's errors are correlated along it, so the points are what
   // the window holds independently. Counted by observations, a 5-frame window of the rendered fast scenario
   // (seed 3: 36 points, both fits at 1.2-1.3 px, the mirror's 22 % lower) flipped a right map by a chi-square
