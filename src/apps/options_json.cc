@@ -43,7 +43,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, pred
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,
                                                 ba_fixed_keyframes, tracker, init, mapping, smoother,
                                                 sigma_trans_floor_rel_depth, seed, relocalise_min_inliers,
-                                                rotation_only, rotation_only_min_tracks, rotation_only_min_ratio, bridge)
+                                                rotation_only, rotation_only_min_tracks, rotation_only_min_ratio,
+                                                rotation_only_over_weak_pose, bridge)
 }  // namespace mcslam::slam
 
 namespace mcslam::frontend {

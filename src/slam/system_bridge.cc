@@ -225,6 +225,9 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
       out.push_back(u);
     }
   bridge_.reset();
+  // A turn under way was about a centre in the provisional map, which the join has just moved: the next turn
+  // starts afresh from this frame.
+  panorama_bearings_.clear();
   RefreshInlierFlags(slot);
   r.cam_from_world = map_.frames[slot].cam_from_world;
   r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);

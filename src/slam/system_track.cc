@@ -86,6 +86,16 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
     return r;
   }
   for (size_t i = 0; i < pts.size(); ++i) pts[i]->inlier = inl[i] != 0;
+  // A pose from fewer points than a turn needs tracks: the turn, when the tracks agree on one
+  // (SystemOptions::rotation_only_over_weak_pose).
+  if (!pose_hint && !bridging() && options_.rotation_only && options_.rotation_only_over_weak_pose &&
+      est.inliers < options_.rotation_only_min_tracks && TrackRotationOnly(slot, &r, /*over_pose=*/true)) {
+    r.provisional = bridging();
+    r.track_ms = Ms(t0);
+    MarkSeen(slot);
+    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    return r;
+  }
   r.score = est.score;
   r.sigma_t = est.sigma_t;
   fr.has_pose = true;
@@ -147,7 +157,7 @@ std::optional<double> System::RecentNoisePx() const {
       UpperMedian(std::vector<double>(recent_residual_px_.begin(), recent_residual_px_.end())));
 }
 
-bool System::TrackRotationOnly(int slot, FrameReport* r) {
+bool System::TrackRotationOnly(int slot, FrameReport* r, bool over_pose) {
   // Only right after a posed frame: its centre is where the camera still is if it only turned.
   if (last_posed_slot_ != slot - 1 || last_posed_slot_ < 0) {
     panorama_bearings_.clear();
@@ -201,8 +211,12 @@ bool System::TrackRotationOnly(int slot, FrameReport* r) {
   // pixel (a KLT tracker's precision on real images) the rms is the images' own (texture, interpolation), not
   // Gaussian noise, and wanders more than that: rendered, 0.08-0.12 px while turning, 0.39 px 1 cm into the move.
   const double noise_rms = std::max(panorama_min_rms_px_, 0.25);
-  const bool moved = rot.ok && std::isfinite(panorama_min_rms_px_) &&
-                     rot.rms_px > noise_rms * (1.0 + 3.0 / std::sqrt(2.0 * rot.inliers));
+  bool moved = rot.ok && std::isfinite(panorama_min_rms_px_) &&
+               rot.rms_px > noise_rms * (1.0 + 3.0 / std::sqrt(2.0 * rot.inliers));
+  // Over a pose the pose step found, the turn must fit from its first frame: within the difference of two of the
+  // tracks' noisy positions (sqrt 2 sigma), never under the quarter pixel above. A slow move that a turn absorbs
+  // shows above it (rotation scenario, seed 8: 0.38-0.68 px a few frames into a move, 0.06-0.12 while turning).
+  if (over_pose && rot.ok && rot.rms_px > std::max(0.25, std::sqrt(2.0) * RecentNoisePx().value_or(0.0))) moved = true;
   if (!rot.ok || ratio < options_.rotation_only_min_ratio || moved) {
     r->note = !rot.ok ? fmt::format("no turn about the last centre: {}", rot.failure)
               : moved ? fmt::format("no turn about the last centre: the tracks' residual grew to {:.2f} px from {:.2f} "
