@@ -91,7 +91,6 @@ FrameReport System::TrackFrame(int slot, const std::optional<Pose>& pose_hint) {
   const std::string pose_note = r.note;  // a turn refused says why in r.note: the pose step's frame keeps its own
   if (!pose_hint && !bridging() && options_.rotation_only && options_.rotation_only_over_weak_pose &&
       est.inliers < options_.rotation_only_min_tracks && TrackRotationOnly(slot, &r, /*over_pose=*/true)) {
-    r.provisional = bridging();
     r.track_ms = Ms(t0);
     MarkSeen(slot);
     r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
