@@ -202,7 +202,8 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   }
   WriteFramesCsv((out / "frames.csv").string(), res.reports, err);
 
-  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0, provisional = 0;
+  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0, provisional = 0,
+      guessed_scale = 0;
   std::vector<double> ms;
   for (const auto& r : res.reports) {
     tracked += r.status == slam::FrameStatus::kTracked;
@@ -211,6 +212,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
     keyframes += r.keyframe;
     rotation_only += r.rotation_only;
     provisional += r.provisional;
+    guessed_scale += r.guessed_scale();
     if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
   }
   const double fps = res.reports.size() / std::max(res.times.wall_s, 1e-9);
@@ -228,6 +230,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   j["keyframes"] = keyframes;
   j["rotation_only"] = rotation_only;  // of the tracked: posed by their turn about the last centre
   j["provisional"] = provisional;      // of the tracked: posed in a provisional map (a bridge over the unmapped)
+  j["guessed_scale"] = guessed_scale;  // of those: its provisional map never joined the map, its scale is a guess
   j["map_points"] = res.map.points.size();
   j["initialised"] = res.initialised;
   j["initialisation"] = nullptr;

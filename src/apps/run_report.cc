@@ -76,7 +76,8 @@ namespace {
 // frames.csv's columns: the back end's, the front end's (empty on a run from observations), the note.
 constexpr const char* kBackEndColumns =
     "index,stamp,status,keyframe,init,scored,inliers,map_points,new_points,adjusted,removed,reproj_mean_px,"
-    "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,score,sigma_tx,sigma_ty,sigma_tz";
+    "reproj_median_px,track_ms,map_ms,adjust_ms,init_ms,trans_err_m,rot_err_deg,score,sigma_tx,sigma_ty,sigma_tz,"
+    "guessed_scale";
 constexpr const char* kFrontEndColumns =
     "features,fe_tracked,fe_detected,"
     "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
@@ -101,11 +102,11 @@ std::string BackEndCells(const slam::FrameReport& r, const std::map<int64_t, con
   std::string te, re;
   if (auto e = error_of_index.find(r.index); r.has_pose && e != error_of_index.end())
     te = fmt::format("{:.6g}", e->second->trans_err_m), re = fmt::format("{:.6g}", e->second->rot_err_deg);
-  return fmt::format("{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{:.6g},{:.6g},{:.6g},{:.6g}",
+  return fmt::format("{},{:.9f},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{:.6g},{:.6g},{:.6g},{:.6g},{}",
                      r.index, r.stamp_s, slam::ToString(r.status), int(r.keyframe), int(r.initialisation), r.scored,
                      r.inliers, r.map_points, r.new_points, r.adjusted, r.removed, r.reproj_mean_px,
                      r.reproj_median_px, r.track_ms, r.map_ms, r.adjust_ms, r.init_ms, te, re, r.score, r.sigma_t.x(),
-                     r.sigma_t.y(), r.sigma_t.z());
+                     r.sigma_t.y(), r.sigma_t.z(), int(r.guessed_scale()));
 }
 
 std::string FrontEndCells(const FrameRow& row) {
@@ -147,7 +148,7 @@ void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport
       // The counts 0, the times empty but the decoding's and the frame's; the note says why (the reader's
       // message names the file; otherwise the name is added).
       const std::string why = row.error.find(row.name) != std::string::npos ? row.error : row.name + ": " + row.error;
-      f << fmt::format("{},{:.9f},skipped,{}{}{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
+      f << fmt::format("{},{:.9f},skipped,{}{}0,{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
                        Repeat(",", 12), Repeat("0,", 23), row.decode_ms, Repeat(",", 10), row.frame_ms, Clean(why));
       continue;
     }
@@ -213,9 +214,11 @@ void ImageRun::WriteReport() {
   }
   int64_t rotation_only = 0;  // of the tracked: posed by their turn about the last centre (the map out of view)
   int64_t provisional = 0;    // of the tracked: posed in a provisional map (a bridge over the unmapped)
+  int64_t guessed_scale = 0;  // of those: its provisional map never joined the map (FrameReport::guessed_scale)
   for (const slam::FrameReport& r : reports) {
     rotation_only += r.rotation_only;
     provisional += r.provisional;
+    guessed_scale += r.guessed_scale();
     sum.tracked += r.status == slam::FrameStatus::kTracked;
     sum.lost += r.status == slam::FrameStatus::kLost;
     sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
@@ -268,6 +271,7 @@ void ImageRun::WriteReport() {
   j["keyframes"] = sum.keyframes;
   j["rotation_only"] = rotation_only;
   j["provisional"] = provisional;
+  j["guessed_scale"] = guessed_scale;
   j["map_points"] = sum.map_points;
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);

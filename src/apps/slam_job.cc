@@ -56,6 +56,7 @@ std::optional<slam::FrameStatus> ReportLog::Put(const slam::FrameReport& r) {
   const slam::FrameStatus replaced = old.status;
   if (r.pose_update && old.has_pose) {  // a corrected pose: the rest of the frame's report stands
     old.cam_from_world = r.cam_from_world;
+    old.joined |= r.joined;
     old.reproj_mean_px = r.reproj_mean_px;
     old.reproj_median_px = r.reproj_median_px;
     return replaced;

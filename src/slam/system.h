@@ -281,6 +281,11 @@ struct FrameReport {
   std::string note;             // why lost / waiting; how posed when not by the pose step
   bool rotation_only = false;   // tracked by its rotation about the last centre (SystemOptions::rotation_only)
   bool provisional = false;     // posed in a provisional map whose scale was guessed (SystemOptions::bridge)
+  // That provisional map joined the map later (its frames scaled to the map's and adjusted: pose updates carry it).
+  bool joined = false;
+  // The pose's scale is still the provisional map's guess: it never joined the map (lost, or the run ended first),
+  // so its frames are in a frame of their own, not the map's (a Sim(3) apart).
+  bool guessed_scale() const { return provisional && !joined; }
   // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
   // ambiguity), as opposed to no initialisation being possible yet.
   bool init_rejected = false;

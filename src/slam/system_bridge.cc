@@ -222,6 +222,7 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
     if (map_.frames[k].has_pose) {
       FrameReport u = PosedReport(k);
       u.pose_update = true;
+      u.joined = true;
       out.push_back(u);
     }
   bridge_.reset();
@@ -231,6 +232,7 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
   RefreshInlierFlags(slot);
   r.cam_from_world = map_.frames[slot].cam_from_world;
   r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
+  r.joined = true;
   ResidualStats(slot, &r);
   r.note += (r.note.empty() ? "" : "; ") +
             fmt::format("relocalised in the map: the provisional map joins it, scaled by {:.3f} (moves {:.1f} deg "
