@@ -202,35 +202,22 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   }
   WriteFramesCsv((out / "frames.csv").string(), res.reports, err);
 
-  int tracked = 0, lost = 0, waiting = 0, keyframes = 0, rotation_only = 0, provisional = 0,
-      guessed_scale = 0;
+  const ReportCounts counts = CountReports(res.reports);
   std::vector<double> ms;
   for (const auto& r : res.reports) {
-    tracked += r.status == slam::FrameStatus::kTracked;
-    lost += r.status == slam::FrameStatus::kLost;
-    waiting += r.status == slam::FrameStatus::kWaitingForInit;
-    keyframes += r.keyframe;
-    rotation_only += r.rotation_only;
-    provisional += r.provisional;
-    guessed_scale += r.guessed_scale();
     if (r.status == slam::FrameStatus::kTracked && !r.initialisation) ms.push_back(r.track_ms + r.map_ms + r.adjust_ms);
   }
   const double fps = res.reports.size() / std::max(res.times.wall_s, 1e-9);
   std::string line = fmt::format("frames={} tracked={} lost={} not_initialised={} keyframes={} map_points={} "
                                  "frame_ms_median={:.3f} fps={:.1f}",
-                                 res.reports.size(), tracked, lost, waiting, keyframes, res.map.points.size(),
+                                 res.reports.size(), counts.tracked, counts.lost, counts.not_initialised,
+                                 counts.keyframes, res.map.points.size(),
                                  UpperMedian(ms), fps);
   nlohmann::json j = RunReportHead(a, "slam");
   j["options"]["samples_per_point"] = options.mapping.samples;
   j["options"]["system"] = ToJson(options);  // every option: what the run did, from its report alone
   j["frames"] = res.reports.size();
-  j["tracked"] = tracked;
-  j["lost"] = lost;
-  j["not_initialised"] = waiting;
-  j["keyframes"] = keyframes;
-  j["rotation_only"] = rotation_only;  // of the tracked: posed by their turn about the last centre
-  j["provisional"] = provisional;      // of the tracked: posed in a provisional map (a bridge over the unmapped)
-  j["guessed_scale"] = guessed_scale;  // of those: its provisional map never joined the map, its scale is a guess
+  PutCounts(counts, &j);
   j["map_points"] = res.map.points.size();
   j["initialised"] = res.initialised;
   j["initialisation"] = nullptr;

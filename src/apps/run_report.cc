@@ -66,6 +66,30 @@ nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c) {
           {"observations", c.observations}, {"note", c.note}};
 }
 
+ReportCounts CountReports(const std::vector<slam::FrameReport>& reports) {
+  ReportCounts c;
+  for (const slam::FrameReport& r : reports) {
+    c.tracked += r.status == slam::FrameStatus::kTracked;
+    c.lost += r.status == slam::FrameStatus::kLost;
+    c.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
+    c.keyframes += r.keyframe;
+    c.rotation_only += r.rotation_only;
+    c.provisional += r.provisional;
+    c.guessed_scale += r.guessed_scale();
+  }
+  return c;
+}
+
+void PutCounts(const ReportCounts& c, nlohmann::json* j) {
+  (*j)["tracked"] = c.tracked;
+  (*j)["lost"] = c.lost;
+  (*j)["not_initialised"] = c.not_initialised;
+  (*j)["keyframes"] = c.keyframes;
+  (*j)["rotation_only"] = c.rotation_only;  // of the tracked: posed by their turn about the last centre
+  (*j)["provisional"] = c.provisional;      // of the tracked: posed in a provisional map (a bridge over the unmapped)
+  (*j)["guessed_scale"] = c.guessed_scale;  // of those: its provisional map never joined the map, its scale a guess
+}
+
 nlohmann::json StatsJson(const eval::ErrorStats& s) {
   auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return {{"count", s.count}, {"rmse", num(s.rmse)}, {"mean", num(s.mean)}, {"median", num(s.median)}, {"max", num(s.max)}};
@@ -86,9 +110,35 @@ constexpr const char* kFrontEndColumns =
     "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,"
     "fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
 
-std::string Repeat(const std::string& cell, int n) {
+// The cells of a frame the reader could not decode, column by column (so that they follow the column lists):
+// its index and stamp, status "skipped", the decoding's and the whole frame's time; the counts 0; what was never
+// measured (the other times, residuals, errors, scores, the pose's sigmas) empty.
+std::string SkippedCells(const FrameRow& row) {
+  const std::string columns = std::string(kBackEndColumns) + ',' + kFrontEndColumns;
   std::string out;
-  for (int i = 0; i < n; ++i) out += cell;
+  size_t begin = 0;
+  while (begin <= columns.size()) {
+    const size_t end = std::min(columns.find(',', begin), columns.size());
+    const std::string name = columns.substr(begin, end - begin);
+    auto ends_with = [&](const std::string& suffix) {
+      return name.size() >= suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+    };
+    if (!out.empty()) out += ',';
+    if (name == "index")
+      out += std::to_string(row.index);
+    else if (name == "stamp")
+      out += fmt::format("{:.9f}", row.stamp_s);
+    else if (name == "status")
+      out += "skipped";
+    else if (name == "decode_ms")
+      out += fmt::format("{:.3f}", row.decode_ms);
+    else if (name == "frame_ms")
+      out += fmt::format("{:.3f}", row.frame_ms);
+    else if (!(ends_with("_ms") || name.starts_with("reproj_") || name.starts_with("sigma_") || name == "score" ||
+               name == "trans_err_m" || name == "rot_err_deg"))
+      out += '0';
+    begin = end + 1;
+  }
   return out;
 }
 
@@ -148,8 +198,7 @@ void WriteFramesCsv(const std::string& path, const std::vector<slam::FrameReport
       // The counts 0, the times empty but the decoding's and the frame's; the note says why (the reader's
       // message names the file; otherwise the name is added).
       const std::string why = row.error.find(row.name) != std::string::npos ? row.error : row.name + ": " + row.error;
-      f << fmt::format("{},{:.9f},skipped,{}{}0,{}{:.3f},{}{:.3f},{}\n", row.index, row.stamp_s, Repeat("0,", 8),
-                       Repeat(",", 12), Repeat("0,", 23), row.decode_ms, Repeat(",", 10), row.frame_ms, Clean(why));
+      f << SkippedCells(row) << ',' << Clean(why) << '\n';
       continue;
     }
     auto it = report_of_index.find(row.index);
@@ -212,17 +261,12 @@ void ImageRun::WriteReport() {
     if (row.before_init) be_init.Add(row.backend_ms);
     features_sum += row.features;
   }
-  int64_t rotation_only = 0;  // of the tracked: posed by their turn about the last centre (the map out of view)
-  int64_t provisional = 0;    // of the tracked: posed in a provisional map (a bridge over the unmapped)
-  int64_t guessed_scale = 0;  // of those: its provisional map never joined the map (FrameReport::guessed_scale)
+  const ReportCounts counts = CountReports(reports);
+  sum.tracked = counts.tracked;
+  sum.lost = counts.lost;
+  sum.not_initialised = counts.not_initialised;
+  sum.keyframes = counts.keyframes;
   for (const slam::FrameReport& r : reports) {
-    rotation_only += r.rotation_only;
-    provisional += r.provisional;
-    guessed_scale += r.guessed_scale();
-    sum.tracked += r.status == slam::FrameStatus::kTracked;
-    sum.lost += r.status == slam::FrameStatus::kLost;
-    sum.not_initialised += r.status == slam::FrameStatus::kWaitingForInit;
-    sum.keyframes += r.keyframe;
     be_track.Add(r.track_ms), be_map.Add(r.map_ms), be_adjust.Add(r.adjust_ms);
     if (r.local_ba) be_local_ba.Add(r.local_ba_ms), be_local_ba_wait.Add(r.local_ba_wait_ms);
     be_adjust_points.Add(r.adjust_points_ms);
@@ -265,13 +309,7 @@ void ImageRun::WriteReport() {
   j["frames_read"] = frames_read;
   j["skipped"] = sum.skipped;
   j["skipped_frames"] = skipped_frames;
-  j["tracked"] = sum.tracked;
-  j["lost"] = sum.lost;
-  j["not_initialised"] = sum.not_initialised;
-  j["keyframes"] = sum.keyframes;
-  j["rotation_only"] = rotation_only;
-  j["provisional"] = provisional;
-  j["guessed_scale"] = guessed_scale;
+  PutCounts(counts, &j);
   j["map_points"] = sum.map_points;
   j["initialised"] = sum.initialised;
   j["initialisation"] = init_frame ? nlohmann::json{{"frame", *init_frame}, {"note", init_note}} : nlohmann::json(nullptr);

@@ -54,6 +54,16 @@ nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c);
 // front end, relocalisation and back end, one after the other) and the front end's median over the pose
 // step's ("track"). Stages named as in report.json's stages_ms.
 std::string StageTable(const std::vector<std::pair<std::string, Stage>>& stages, int64_t frames, double wall_s);
+// report.json's per-frame counts, the same in every mode: frames tracked, lost, before the map, keyframes, and of
+// the tracked those posed by a turn about the last centre (rotation_only), in a provisional map (provisional), and
+// in one that never joined the map (guessed_scale: FrameReport::guessed_scale).
+struct ReportCounts {
+  int64_t tracked = 0, lost = 0, not_initialised = 0, keyframes = 0, rotation_only = 0, provisional = 0,
+          guessed_scale = 0;
+};
+ReportCounts CountReports(const std::vector<slam::FrameReport>& reports);
+// Writes them into report.json's object `j` under those names.
+void PutCounts(const ReportCounts& counts, nlohmann::json* j);
 // {"count", "rmse", "mean", "median", "max"}, null where not finite.
 nlohmann::json StatsJson(const eval::ErrorStats& s);
 // frames.csv, one schema for every run: per frame the back end's report and its error against the ground truth

@@ -235,8 +235,20 @@ TEST(CliImages, CorruptFrameIsSkippedAndCounted) {
   // The gap of one frame costs nothing: the others are all tracked (measured).
   EXPECT_EQ(j["tracked"], 39) << r.output;
   EXPECT_NE(ReadText(out + "/frames.csv").find(",skipped,"), std::string::npos);
-  // The skipped frame's line has every column too (it had one too few).
+  // The skipped frame's line has every column too (it had one too few), each cell what its column says: the
+  // counts 0, what was never measured empty, the decoding's time measured.
   EXPECT_EQ(testing::CsvShapeErrors(out + "/frames.csv"), std::vector<std::string>{});
+  const std::vector<std::string> status = testing::CsvColumn(out + "/frames.csv", "status");
+  const auto row = std::find(status.begin(), status.end(), "skipped") - status.begin();
+  ASSERT_LT(row, static_cast<long>(status.size()));
+  auto cell = [&](const std::string& name) { return testing::CsvColumn(out + "/frames.csv", name).at(row); };
+  EXPECT_EQ(cell("index"), "20");
+  for (const char* zero : {"keyframe", "map_points", "guessed_scale", "features", "fe_anchor_shift_px", "fe_jolt_recovered"})
+    EXPECT_EQ(cell(zero), "0") << zero;
+  for (const char* empty : {"reproj_mean_px", "track_ms", "trans_err_m", "sigma_tz", "backend_ms", "fe_total_ms"})
+    EXPECT_EQ(cell(empty), "") << empty;
+  EXPECT_GT(std::stod(cell("decode_ms")), 0.0);
+  EXPECT_NE(cell("note").find("frame_0020.png"), std::string::npos) << cell("note");
 }
 
 // The sequence's frames as a grey video at 30 fps.
