@@ -12,6 +12,8 @@
 #include <stdexcept>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <fmt/format.h>
 
@@ -294,6 +296,67 @@ Pose RefineRelativePose(const Pose& cam2_from_cam1, std::span<const Eigen::Vecto
   s.converged = found;
   s.final_cost = ne.cost;
   return pose;
+}
+
+Eigen::Vector3d TranslationGivenRotation(const Eigen::Matrix3d& cam2_from_cam1_rotation,
+                                         std::span<const Eigen::Vector2d> uv_norm1,
+                                         std::span<const Eigen::Vector2d> uv_norm2, std::span<const int> indices) {
+  if (uv_norm1.size() != uv_norm2.size()) return Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  int n = 0;
+  auto add = [&](int i) {
+    const Eigen::Vector3d a = (cam2_from_cam1_rotation * uv_norm1[i].homogeneous()).cross(uv_norm2[i].homogeneous());
+    sum += a * a.transpose();
+    ++n;
+  };
+  if (indices.empty()) {
+    for (int i = 0; i < static_cast<int>(uv_norm1.size()); ++i) add(i);
+  } else {
+    for (const int i : indices) add(i);
+  }
+  if (n < 2 || !sum.allFinite()) return Eigen::Vector3d::Zero();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(sum);
+  return eigen.eigenvectors().col(0);  // eigenvalues ascending
+}
+
+std::vector<RelativePoseMinimum> RelativePoseMinima(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
+                                                    std::span<const Eigen::Vector2d> uv_norm2,
+                                                    std::span<const int> indices, double radius_deg,
+                                                    const RefineOptions& options) {
+  options.Check();
+  if (!(radius_deg > 0) || !std::isfinite(radius_deg))
+    throw std::invalid_argument(fmt::format("RelativePoseMinima: radius_deg must be > 0, got {}", radius_deg));
+  std::vector<Pose> starts{cam2_from_cam1};
+  for (const double fraction : {0.5, 1.0})
+    for (int x = -1; x <= 1; ++x)
+      for (int y = -1; y <= 1; ++y)
+        for (int z = -1; z <= 1; ++z) {
+          if (x == 0 && y == 0 && z == 0) continue;
+          const Eigen::Vector3d axis = Eigen::Vector3d(x, y, z).normalized();
+          const Eigen::Quaterniond q =
+              (Eigen::Quaterniond(Eigen::AngleAxisd(fraction * radius_deg * M_PI / 180.0, axis)) * cam2_from_cam1.q)
+                  .normalized();
+          const Eigen::Vector3d t = TranslationGivenRotation(q.toRotationMatrix(), uv_norm1, uv_norm2, indices);
+          if (t.squaredNorm() > 0.5) starts.emplace_back(q, t);
+        }
+  std::vector<RelativePoseMinimum> minima;
+  const double same_deg = radius_deg / 10.0;
+  for (const Pose& start : starts) {
+    RefineSummary summary;
+    const Pose pose = RefineRelativePose(start, uv_norm1, uv_norm2, indices, options, &summary);
+    // A refinement that ran out of iterations is still crawling along the valley: not a minimum.
+    if (!summary.converged || !pose.AllFinite() || !std::isfinite(summary.final_cost)) continue;
+    auto same = std::find_if(minima.begin(), minima.end(), [&](const RelativePoseMinimum& m) {
+      return AngularDistanceDeg(m.cam2_from_cam1.q, pose.q) <= same_deg;
+    });
+    if (same == minima.end())
+      minima.push_back({pose, summary.final_cost});
+    else if (summary.final_cost < same->cost)
+      *same = {pose, summary.final_cost};  // the same basin, reached closer to its floor
+  }
+  std::sort(minima.begin(), minima.end(),
+            [](const RelativePoseMinimum& a, const RelativePoseMinimum& b) { return a.cost < b.cost; });
+  return minima;
 }
 
 }  // namespace mcslam::geometry

@@ -10,6 +10,7 @@
 #include <array>
 #include <optional>
 #include <span>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -94,5 +95,32 @@ struct RefineSummary {
 Pose RefineRelativePose(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
                         std::span<const Eigen::Vector2d> uv_norm2, std::span<const int> indices,
                         const RefineOptions& options, RefineSummary* summary = nullptr);
+
+// The unit translation direction that best satisfies the epipolar constraint for a given rotation: x2^T [t]x R x1
+// = t . (R x1 x x2) = 0 for every correspondence in `indices` (all when empty), solved in least squares (the
+// eigenvector of the smallest eigenvalue of sum a a^T, a = R x1 x x2). The sign is arbitrary (cheirality decides
+// it); the zero vector when there are fewer than 2 correspondences or a non-finite coordinate.
+Eigen::Vector3d TranslationGivenRotation(const Eigen::Matrix3d& cam2_from_cam1_rotation,
+                                         std::span<const Eigen::Vector2d> uv_norm1,
+                                         std::span<const Eigen::Vector2d> uv_norm2, std::span<const int> indices = {});
+
+struct RelativePoseMinimum {
+  Pose cam2_from_cam1;  // |t| = 1, sign as the refinement left it (cheirality decides it)
+  double cost = 0;      // RefineRelativePose's final cost: sum of squared Sampson distances (px^2 with scale = focal)
+};
+
+// The local minima of the two-view (Sampson) cost around a relative pose, by multi-start refinement. Through a
+// narrow field of view a small rotation about an axis in the image plane and a sideways translation move the
+// image alike (the bas-relief ambiguity), so the cost has a long, nearly flat valley that may hold more than one
+// minimum, and a refinement stops in whichever basin its start lies in. The starts: the given pose, and its
+// rotation turned by radius_deg / 2 and by radius_deg about each of the 26 directions of a cube's faces, edges
+// and corners (in view 2), the translation re-solved for each (TranslationGivenRotation); each refined by
+// RefineRelativePose(options) over `indices`. Returns the distinct minima (the refinements that converged, their
+// rotations more than radius_deg / 10 apart), cheapest first; empty when none converged. radius_deg is best set to the views' parallax: the valley's extent in rotation is
+// about the angle the baseline subtends. Throws std::invalid_argument on bad options or radius_deg <= 0.
+std::vector<RelativePoseMinimum> RelativePoseMinima(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
+                                                    std::span<const Eigen::Vector2d> uv_norm2,
+                                                    std::span<const int> indices, double radius_deg,
+                                                    const RefineOptions& options);
 
 }  // namespace mcslam::geometry

@@ -393,6 +393,12 @@ class System {
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
                                                  std::string* failure, bool check_parallax = true,
                                                  bool dense_schur = false) const;
+  // The other minima of the two views' cost in the bas-relief valley around `winner` (geometry::RelativePoseMinima,
+  // over the winner's inliers), those that might compete with it, each refined over the window (eligible when it
+  // has the parallax asked for).
+  std::vector<InitHypothesis> ValleyNeighbours(const std::vector<int>& window, const std::vector<Eigen::Vector2d>& n1,
+                                               const std::vector<Eigen::Vector2d>& n2, const std::vector<int64_t>& ids,
+                                               const InitHypothesis& winner) const;
   // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
   // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
   // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).

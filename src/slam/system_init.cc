@@ -14,6 +14,7 @@
 
 #include "core/median.h"
 #include "geometry/bundle_adjust.h"
+#include "geometry/essential.h"
 #include "geometry/pnp.h"
 #include "geometry/rotation_only.h"
 #include "geometry/self_calibration.h"
@@ -214,6 +215,71 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   return h;
 }
 
+std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<int>& window,
+                                                              const std::vector<Eigen::Vector2d>& n1,
+                                                              const std::vector<Eigen::Vector2d>& n2,
+                                                              const std::vector<int64_t>& ids,
+                                                              const InitHypothesis& winner) const {
+  std::unordered_map<int64_t, int> at;
+  for (size_t i = 0; i < ids.size(); ++i) at[ids[i]] = static_cast<int>(i);
+  std::vector<int> used;  // the winner's points: its inliers
+  for (int64_t id : winner.point_ids)
+    if (auto it = at.find(id); it != at.end()) used.push_back(it->second);
+  const Pose& last = winner.poses.back();
+  if (used.size() < 8 || !(last.t.norm() > 0)) return {};
+  // The valley's extent in rotation is about the angle the baseline subtends: the window's median parallax.
+  std::vector<double> parallax;
+  const Pose ends[2] = {winner.poses.front(), last};
+  for (const Eigen::Vector3d& X : winner.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
+  const double radius_deg = UpperMedian(parallax);
+  if (!(radius_deg > 0)) return {};
+  geometry::RefineOptions ro;
+  ro.scale = focal_px_;
+  ro.max_iterations = 100;  // the valley is flat: some starts crawl along it before they converge
+  const std::vector<geometry::RelativePoseMinimum> minima =
+      geometry::RelativePoseMinima(Pose(last.q, last.t.normalized()), n1, n2, used, radius_deg, ro);
+  if (minima.empty()) return {};
+  // The winner's own basin: the minimum nearest its rotation (its cost the bar the others are measured by).
+  auto own = std::min_element(minima.begin(), minima.end(), [&](const auto& a, const auto& b) {
+    return AngularDistanceDeg(a.cam2_from_cam1.q, last.q) < AngularDistanceDeg(b.cam2_from_cam1.q, last.q);
+  });
+  // The noise variance of one correspondence's Sampson distance, from the cheapest minimum; a minimum competes
+  // when it is cheaper than the winner's, or worse by less than the ambiguity test's chi-square.
+  const double variance = std::max(minima.front().cost / static_cast<double>(used.size()), kCostFloorPx2);
+  std::vector<InitHypothesis> out;
+  for (auto m = minima.begin(); m != minima.end(); ++m) {
+    if (m == own || (m->cost - own->cost) / variance >= options_.init.ambiguity_chi2) continue;
+    // Cheirality decides the translation's sign: the points of the winner's inliers in front of both views.
+    const Pose signs[2] = {m->cam2_from_cam1, Pose(m->cam2_from_cam1.q, -m->cam2_from_cam1.t)};
+    std::vector<Eigen::Vector3d> best_points;
+    std::vector<int64_t> best_ids;
+    Pose best_pose;
+    for (const Pose& pose : signs) {
+      const Pose two[2] = {Pose(), pose};
+      std::vector<Eigen::Vector3d> points;
+      std::vector<int64_t> point_ids;
+      for (int i : used) {
+        const Eigen::Vector2d uv[2] = {n1[i], n2[i]};
+        const Eigen::Vector4d X = geometry::TriangulateHomogeneous(two, uv);
+        if (!(std::abs(X.w()) > 1e-12)) continue;
+        const Eigen::Vector3d P = X.head<3>() / X.w();
+        if (P.z() > 0 && (pose * P).z() > 0) points.push_back(P), point_ids.push_back(ids[i]);
+      }
+      if (points.size() > best_points.size()) best_points = std::move(points), best_ids = std::move(point_ids), best_pose = pose;
+    }
+    if (2 * best_points.size() < used.size()) continue;
+    // Refined whatever its parallax: short of it, it still stands against the winner in the ambiguity test.
+    std::optional<InitHypothesis> h = RefineInitWindow(window, best_pose, std::move(best_points), std::move(best_ids),
+                                                       nullptr, /*check_parallax=*/false);
+    if (!h) continue;
+    h->two_view_inliers = winner.two_view_inliers;
+    h->two_view_parallax_deg = winner.two_view_parallax_deg;
+    h->eligible = h->parallax_ok;
+    out.push_back(std::move(*h));
+  }
+  return out;
+}
+
 std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<int>& window,
                                                               const std::vector<Eigen::Vector2d>& n1,
                                                               const std::vector<Eigen::Vector2d>& n2,
@@ -305,6 +371,14 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
     return best_it;
   };
   if (cheapest() == refined.end()) return fail(last_failure, false);
+  // The bas-relief valley: through a narrow field of view the two views' cost is nearly flat along a trade of
+  // rotation for sideways translation and may hold more than one minimum there; every seed above may have
+  // stopped in the wrong one. The other minima near the winner that might compete with it (cheaper by the two
+  // views, or within the ambiguity test's reach) are refined over the window too; the window decides.
+  {
+    const InitHypothesis winner = *cheapest();
+    for (InitHypothesis& h : ValleyNeighbours(window, n1, n2, ids, winner)) refined.push_back(std::move(h));
+  }
   // The depth-reversal (Necker) ambiguity: seen through a narrow field of view, a scene and its mirror image
   // in depth, with the cameras turned the other way, project nearly alike. The mirror of the winner is refined
   // too and competes with the rest.
@@ -331,10 +405,11 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
     // the window's noise variance (the best solution's mean squared residual, at least the floor's).
     const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
     if (distinct && chi2 < io.ambiguity_chi2) {
-      return fail(fmt::format("ambiguous initialisation: {} explains the window about as well as the best solution "
-                              "(mean squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
+      // An ineligible solution (short of parallax, a plane's second motion) may even explain it better.
+      return fail(fmt::format("ambiguous initialisation: {} explains the window {} the best solution that may be "
+                              "taken (mean squared residual {:.4f} against {:.4f} px^2): waiting for more motion",
                               h.mirrored ? "its mirror in depth" : "another solution with another structure",
-                              h.cost, best->cost),
+                              h.cost < best->cost ? "better than" : "about as well as", h.cost, best->cost),
                   true);
     }
   }

@@ -442,6 +442,14 @@ GapRun RunOverAGap(const std::string& scenario, const std::string& out, const st
   return g;
 }
 
+// Renders the rotation scenario of `seed` into dir/s and runs it with default settings (and `extra`) into dir/r;
+// the run's result (its exit code asserted by the caller).
+testing::CommandResult RunRenderedRotation(const TempDir& dir, int seed, const std::string& extra = "") {
+  const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed {} --render --out {}", seed, dir / "s"));
+  EXPECT_EQ(s.exit_code, 0) << s.output;
+  return RunMcslam(fmt::format("run {} --dataset synthetic --seed {} {} --out {}", dir / "s", seed, extra, dir / "r"));
+}
+
 // The rendered rotation scenario: the camera pans away from everything mapped (a turn, tracked about the last
 // centre), moves on through the unmapped half of the room, and pans back. Before the bridge every frame of the
 // move was lost (205 and 200 of 270 frames tracked on seeds 3 and 4); now a provisional map made from two views
@@ -456,9 +464,7 @@ GapRun RunOverAGap(const std::string& scenario, const std::string& out, const st
 TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
   for (const int seed : {1, 3}) {
     TempDir dir;
-    const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed {} --render --out {}", seed, dir / "s"));
-    ASSERT_EQ(s.exit_code, 0) << s.output;
-    const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed {} --out {}", dir / "s", seed, dir / "r"));
+    const auto r = RunRenderedRotation(dir, seed);
     ASSERT_EQ(r.exit_code, 0) << r.output;
     EXPECT_GE(Field(r.output, "tracked"), 267) << "seed " << seed << ": " << r.output;
     EXPECT_LT(Field(r.output, "ate_rmse"), 0.02) << "seed " << seed << ": " << r.output;
@@ -491,9 +497,7 @@ TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
 // note that made the provisional map's anchor; the whole run flags none (the test above).
 TEST(CliRun, AProvisionalMapThatNeverJoinsLeavesItsFramesFlaggedAsAGuessedScale) {
   TempDir dir;
-  const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed 1 --render --out {}", dir / "s"));
-  ASSERT_EQ(s.exit_code, 0) << s.output;
-  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed 1 --end 180 --out {}", dir / "s", dir / "r"));
+  const auto r = RunRenderedRotation(dir, 1, "--end 180");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
   EXPECT_GE(report["guessed_scale"].get<int>(), 20) << r.output;
@@ -511,6 +515,28 @@ TEST(CliRun, AProvisionalMapThatNeverJoinsLeavesItsFramesFlaggedAsAGuessedScale)
   ASSERT_GE(anchor, 0);
   for (size_t i = 0; i < index.size(); ++i)
     if (guessed[i] == "1") EXPECT_GT(std::stoi(index[i]), anchor) << "frame " << index[i];
+}
+
+// The bas-relief valley of a small-parallax window: held-out rotation seed 15 makes its provisional map from frames
+// 121-130 at 3.7 deg of parallax, where the two views' cost has two minima along the valley and every two-view
+// seed (8-point, 5-point) stopped in the wrong one: its rotation 6.6 deg where the camera turned 3.9, the move 55
+// deg off; that map was lost at frame 206 and the trajectory ended 64 cm off (21 % of the 2.97 m path).
+// The multi-start search of the valley (geometry::RelativePoseMinima) finds the other minimum, the true motion's,
+// which explains the window better (mean squared residual 0.0068 against 0.0084 px^2) but, refined, falls short
+// of the parallax asked for: it cannot be taken, and it stands against the wrong one, so the provisional map
+// waits ("ambiguous initialisation", frames 130-140) and is made at frame 141 from 11.9 deg of parallax. Measured:
+// 270 / 270 tracked, the provisional map joined (no frame at a guessed scale), ATE 2.2 cm (0.75 % of the path).
+// Bounds: every frame tracked; none at a guessed scale; ATE under 1 % of the path (the robustness matrix's
+// success), 21x under the failure.
+TEST(CliRun, ASmallParallaxProvisionalMapTakesTheBetterMinimumOfTheBasReliefValley) {
+  TempDir dir;
+  const auto r = RunRenderedRotation(dir, 15);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(Field(r.output, "tracked"), 270) << r.output;
+  EXPECT_LT(Field(r.output, "ate_rmse"), 0.0297) << r.output;
+  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+  EXPECT_GT(report["provisional"].get<int>(), 20) << r.output;
+  EXPECT_EQ(report["guessed_scale"].get<int>(), 0) << r.output;
 }
 
 // A car at 1 m a frame (the forward scenario, rendered: a 90-degree bend, 119 m): the map renews itself every few
