@@ -50,6 +50,13 @@ std::vector<int> detail::EvenlySpread(int n, int m) {
   return out;
 }
 
+double detail::PooledLag1Correlation(const std::vector<std::vector<Eigen::Vector2d>>& sequences) {
+  double lagged = 0, squared = 0;
+  for (const std::vector<Eigen::Vector2d>& r : sequences)
+    for (size_t k = 1; k < r.size(); ++k) lagged += r[k].dot(r[k - 1]), squared += r[k].squaredNorm();
+  return squared > 0 ? lagged / squared : 0.0;
+}
+
 double detail::CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px) {
   if (residuals_px.empty()) return std::numeric_limits<double>::infinity();
   const double cap_sq = cap_px * cap_px;
@@ -213,6 +220,19 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
                             "asks for it)",
                             refined_parallax, needed, noise_px));
   return h;
+}
+
+double System::TrackResidualCorrelation(const std::vector<int>& window, const InitHypothesis& h) const {
+  std::unordered_map<int64_t, int> index;
+  for (size_t i = 0; i < h.point_ids.size(); ++i) index[h.point_ids[i]] = static_cast<int>(i);
+  std::vector<std::vector<Eigen::Vector2d>> residuals(h.points.size());  // per track, in window order (px)
+  for (size_t w = 0; w < window.size() && w < h.poses.size(); ++w)
+    for (const FeatureUndistorted& f : map_.frames[window[w]].features)
+      if (auto it = index.find(f.id); it != index.end()) {
+        const Eigen::Vector3d X = h.poses[w] * h.points[it->second];
+        if (X.z() > 0) residuals[it->second].push_back((X.head<2>() / X.z() - ideal_.PixelToNormalized(f.uv_px)) * focal_px_);
+      }
+  return detail::PooledLag1Correlation(residuals);
 }
 
 std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<int>& window,
@@ -398,12 +418,21 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   // depth-reversed mirror, the plane's twin) explains the window about as well. The views cannot tell them
   // apart yet: wait for more motion rather than risk a wrong (mirrored, twisted) map.
   std::optional<InitHypothesis> best = *cheapest();
+  // A track's residuals are correlated along it where its error is not the tracker's noise but a bias that
+  // changes smoothly with the view (a corner that is an edge's T-junction or a silhouette): then its observations
+  // are not independent and the chi-square below, summed over them, overstates what the window tells. With the
+  // lag-1 correlation rho of consecutive residuals along the tracks (of the best solution), n observations count
+  // as n (1 - rho) / (1 + rho), the effective size of an AR(1) sample; rho < 0 counts as 0 (never bolder).
+  const double rho = std::clamp(TrackResidualCorrelation(window, *best), 0.0, 1.0);
+  const double effective = (1.0 - rho) / (1.0 + rho);
   for (const InitHypothesis& h : refined) {
     const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||
                           AngularDistanceDeg(best->poses.back().q, h.poses.back().q) > kSameRotationDeg;
     // How much worse it explains the window, as a chi-square: the summed squared residuals' difference over
-    // the window's noise variance (the best solution's mean squared residual, at least the floor's).
-    const double chi2 = (h.cost - best->cost) * best->observations / std::max(best->cost, kCostFloorPx2);
+    // the window's noise variance (the best solution's mean squared residual, at least the floor's), over the
+    // effective number of observations.
+    const double chi2 =
+        (h.cost - best->cost) * best->observations * effective / std::max(best->cost, kCostFloorPx2);
     if (distinct && chi2 < io.ambiguity_chi2) {
       // An ineligible solution (short of parallax, a plane's second motion) may even explain it better.
       return fail(fmt::format("ambiguous initialisation: {} explains the window {} the best solution that may be "

@@ -36,6 +36,11 @@ std::vector<Eigen::Vector3d> MirrorInDepth(const std::vector<Eigen::Vector3d>& p
 // them: i (n - 1) / (m - 1) for i < m. All n when m >= n. The frames a long window is judged or refined on.
 std::vector<int> EvenlySpread(int n, int m);
 
+// The lag-1 correlation of residual sequences, pooled: sum over sequences and k >= 1 of r_k . r_(k-1), over the
+// sum of |r_k|^2 over the same k. About 0 for independent noise, phi for an AR(1) sequence r_k = phi r_(k-1) + e_k,
+// 1 for a constant bias; 0 when no sequence has two entries.
+double PooledLag1Correlation(const std::vector<std::vector<Eigen::Vector2d>>& sequences);
+
 // The mean over `residuals_px` of min(r^2, cap_px^2) (px^2): a window's fit, each wrong match counted at most
 // the cap; infinity for none.
 double CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px);

@@ -16,9 +16,34 @@
 #include "sim/scenarios.h"
 #include "slam/pose_tracker.h"
 #include "slam/system.h"
+#include "slam/system_internal.h"
 
 namespace mcslam::slam {
 namespace {
+
+// The initialisation's ambiguity test counts a window's observations as n (1 - rho) / (1 + rho), rho the pooled
+// lag-1 correlation of the tracks' residuals. 200 tracks of 20 residuals: independent Gaussian noise gives rho
+// within 4 standard errors (1 / sqrt(3800)) of 0; an AR(1) sequence with phi = 0.8 (started stationary) gives 0.8
+// within 0.05 (its standard error is ~0.01 here); a constant bias gives 1; no pair of consecutive residuals gives 0.
+TEST(PooledLag1Correlation, NoiseBiasAndAR1) {
+  CounterRng rng(7, 1);
+  std::vector<std::vector<Eigen::Vector2d>> noise(200), ar1(200), bias(200);
+  for (int t = 0; t < 200; ++t) {
+    Eigen::Vector2d last(rng.Normal(), rng.Normal());
+    const Eigen::Vector2d b(rng.Normal(), rng.Normal());
+    for (int k = 0; k < 20; ++k) {
+      const double nu = rng.Normal(), nv = rng.Normal();
+      noise[t].emplace_back(nu, nv);
+      last = 0.8 * last + std::sqrt(1 - 0.64) * Eigen::Vector2d(rng.Normal(), rng.Normal());
+      ar1[t].push_back(last);
+      bias[t].push_back(b);
+    }
+  }
+  EXPECT_LT(std::abs(detail::PooledLag1Correlation(noise)), 4.0 / std::sqrt(3800.0));
+  EXPECT_NEAR(detail::PooledLag1Correlation(ar1), 0.8, 0.05);
+  EXPECT_NEAR(detail::PooledLag1Correlation(bias), 1.0, 1e-12);
+  EXPECT_EQ(detail::PooledLag1Correlation({{Eigen::Vector2d(1, 2)}, {}}), 0.0);
+}
 
 apps::SequenceInput Scenario(int frames, double noise, double outliers, uint64_t seed = 1) {
   sim::PaperScenarioOptions so;
