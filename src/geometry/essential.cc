@@ -16,6 +16,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 
 namespace mcslam::geometry {
 namespace {
@@ -341,9 +342,15 @@ std::vector<RelativePoseMinimum> RelativePoseMinima(const Pose& cam2_from_cam1, 
         }
   std::vector<RelativePoseMinimum> minima;
   const double same_deg = radius_deg / 10.0;
-  for (const Pose& start : starts) {
-    RefineSummary summary;
-    const Pose pose = RefineRelativePose(start, uv_norm1, uv_norm2, indices, options, &summary);
+  // The refinements are independent: run in parallel, merged in the starts' order (the same minima as in turn).
+  std::vector<Pose> refined(starts.size());
+  std::vector<RefineSummary> summaries(starts.size());
+  tbb::parallel_for(size_t{0}, starts.size(), [&](size_t k) {
+    refined[k] = RefineRelativePose(starts[k], uv_norm1, uv_norm2, indices, options, &summaries[k]);
+  });
+  for (size_t k = 0; k < starts.size(); ++k) {
+    const RefineSummary& summary = summaries[k];
+    const Pose& pose = refined[k];
     // A refinement that ran out of iterations is still crawling along the valley: not a minimum.
     if (!summary.converged || !pose.AllFinite() || !std::isfinite(summary.final_cost)) continue;
     auto same = std::find_if(minima.begin(), minima.end(), [&](const RelativePoseMinimum& m) {

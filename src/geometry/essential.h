@@ -115,9 +115,11 @@ struct RelativePoseMinimum {
 // minimum, and a refinement stops in whichever basin its start lies in. The starts: the given pose, and its
 // rotation turned by radius_deg / 2 and by radius_deg about each of the 26 directions of a cube's faces, edges
 // and corners (in view 2), the translation re-solved for each (TranslationGivenRotation); each refined by
-// RefineRelativePose(options) over `indices`. Returns the distinct minima (the refinements that converged, their
-// rotations more than radius_deg / 10 apart), cheapest first; empty when none converged. radius_deg is best set to the views' parallax: the valley's extent in rotation is
-// about the angle the baseline subtends. Throws std::invalid_argument on bad options or radius_deg <= 0.
+// RefineRelativePose(options) over `indices`, in parallel (the result does not depend on the threads). Returns the
+// distinct minima (the refinements that converged, their rotations more than radius_deg / 10 apart), cheapest
+// first; empty when none converged. radius_deg is best set to the views' parallax: the valley's extent in rotation
+// is about the angle the baseline subtends. Throws std::invalid_argument on bad options or radius_deg <= 0.
+// bench/bench_relative_pose_minima measures it.
 std::vector<RelativePoseMinimum> RelativePoseMinima(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
                                                     std::span<const Eigen::Vector2d> uv_norm2,
                                                     std::span<const int> indices, double radius_deg,

@@ -7,6 +7,7 @@
 #include "geometry/triangulation.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -58,6 +59,26 @@ Eigen::Vector4d TriangulateHomogeneous(std::span<const Pose> cam_from_world, std
   }
   const Eigen::JacobiSVD<Eigen::Matrix<double, Eigen::Dynamic, 4>> svd(a, Eigen::ComputeFullV);
   return svd.matrixV().col(3);
+}
+
+InFrontOfBoth TriangulateInFrontOfBoth(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
+                                       std::span<const Eigen::Vector2d> uv_norm2, std::span<const int> indices) {
+  InFrontOfBoth out;
+  const std::array<Pose, 2> poses = {Pose::Identity(), cam2_from_cam1};
+  auto consider = [&](int i) {
+    const std::array<Eigen::Vector2d, 2> obs = {uv_norm1[i], uv_norm2[i]};
+    const Eigen::Vector4d x = TriangulateHomogeneous(poses, obs);
+    if (!x.allFinite() || !(std::abs(x.w()) > 1e-12 * x.head<3>().norm())) return;  // at infinity: no sign
+    const Eigen::Vector3d p1 = x.head<3>() / x.w();
+    if (p1.z() > 0 && (cam2_from_cam1 * p1).z() > 0) out.indices.push_back(i), out.points_in_cam1.push_back(p1);
+  };
+  if (uv_norm1.size() != uv_norm2.size()) return out;
+  if (indices.empty()) {
+    for (int i = 0; i < static_cast<int>(uv_norm1.size()); ++i) consider(i);
+  } else {
+    for (const int i : indices) consider(i);
+  }
+  return out;
 }
 
 double ParallaxDeg(std::span<const Pose> cam_from_world, const Eigen::Vector3d& point_in_world) {

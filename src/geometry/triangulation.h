@@ -5,6 +5,7 @@
 // frames with a long enough baseline, §6.1-6.2); this is that step.
 #include <span>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -53,6 +54,17 @@ Triangulation TriangulateDlt(std::span<const Pose> cam_from_world, std::span<con
 
 // Homogeneous DLT solution alone (unit norm, no checks); the zero vector on bad input (sizes, < 2 views).
 Eigen::Vector4d TriangulateHomogeneous(std::span<const Pose> cam_from_world, std::span<const Eigen::Vector2d> uv_norm);
+
+// The correspondences whose two-view DLT triangulation (camera 1 at the origin, camera 2 at cam2_from_cam1) lies
+// in front of both cameras: cheirality, which decides among the decompositions of an essential matrix and the sign
+// of a translation. Over `indices` (every correspondence when empty); a point at infinity says nothing and is left
+// out. The kept correspondences' indices, ascending as given, with their points in camera 1.
+struct InFrontOfBoth {
+  std::vector<int> indices;
+  std::vector<Eigen::Vector3d> points_in_cam1;
+};
+InFrontOfBoth TriangulateInFrontOfBoth(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,
+                                       std::span<const Eigen::Vector2d> uv_norm2, std::span<const int> indices = {});
 
 // Largest angle (degrees) between the rays from the camera centres to the point, over all pairs of views.
 double ParallaxDeg(std::span<const Pose> cam_from_world, const Eigen::Vector3d& point_in_world);

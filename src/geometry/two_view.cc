@@ -265,16 +265,8 @@ bool FivePointOpenCV(std::span<const Eigen::Vector2d> uv1, std::span<const Eigen
 // Correspondences (among `idx`) whose two-view triangulation lies in front of both cameras.
 int CountInFront(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv1, std::span<const Eigen::Vector2d> uv2,
                  const std::vector<int>& idx) {
-  const std::array<Pose, 2> poses = {Pose::Identity(), cam2_from_cam1};
-  int count = 0;
-  for (const int i : idx) {
-    const std::array<Eigen::Vector2d, 2> obs = {uv1[i], uv2[i]};
-    const Eigen::Vector4d x = TriangulateHomogeneous(poses, obs);
-    if (!(std::abs(x.w()) > 1e-12 * x.head<3>().norm())) continue;  // at infinity: says nothing about the sign
-    const Eigen::Vector3d p1 = x.head<3>() / x.w();
-    if (p1.z() > 0 && (cam2_from_cam1 * p1).z() > 0) ++count;
-  }
-  return count;
+  if (idx.empty()) return 0;  // (an empty list means every correspondence to TriangulateInFrontOfBoth)
+  return static_cast<int>(TriangulateInFrontOfBoth(cam2_from_cam1, uv1, uv2, idx).indices.size());
 }
 
 // Step 5 of EstimateTwoView and of the planar path: linear triangulation of the inliers at res->cam2_from_cam1,

@@ -385,6 +385,11 @@ class System {
     // in the ambiguity test: while one explains the window as well, no solution is taken.
     bool eligible = true;
     bool parallax_ok = false;  // the refined window has the parallax asked for
+    double median_parallax_deg = 0;  // of the points, between the window's first and last cameras
+    // The lag-1 correlation of the tracks' residuals between consecutive frames of the window, pooled over the
+    // tracks (detail::PooledLag1Correlation): about 0 for a tracker's independent noise, towards 1 for a bias
+    // that changes smoothly with the view.
+    double residual_correlation = 0;
   };
   // Places every frame of `window` by PnP against `points` (the last one at last_from_ref when given), refines
   // the window by one bundle adjustment and checks it (points in front, parallax for the tracks' noise).
@@ -393,10 +398,6 @@ class System {
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
                                                  std::string* failure, bool check_parallax = true,
                                                  bool dense_schur = false) const;
-  // The lag-1 correlation of a track's residuals (px, under `h`) between consecutive frames of `window`, pooled
-  // over the tracks: sum r_k . r_(k-1) / sum |r_k|^2; about 0 for a tracker's independent noise, towards 1 for a
-  // bias that changes smoothly with the view; 0 without consecutive observations.
-  double TrackResidualCorrelation(const std::vector<int>& window, const InitHypothesis& h) const;
   // The other minima of the two views' cost in the bas-relief valley around `winner` (geometry::RelativePoseMinima,
   // over the winner's inliers), those that might compete with it, each refined over the window (eligible when it
   // has the parallax asked for).

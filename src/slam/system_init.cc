@@ -196,8 +196,13 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   bo.dense_schur = dense_schur;
   if (io.refine_window) geometry::BundleAdjust(h.poses, h.points, obs, fixed, bo);
   std::vector<double> res;
-  for (const geometry::BundleObservation& o : obs)
+  std::vector<std::vector<Eigen::Vector2d>> along(h.points.size());  // each track's residuals in window order (px)
+  for (const geometry::BundleObservation& o : obs) {
     res.push_back(geometry::ReprojectionErrorPx(h.poses[o.camera], h.points[o.point], o.uv_norm, focal));
+    const Eigen::Vector3d X = h.poses[o.camera] * h.points[o.point];
+    if (X.z() > 0) along[o.point].push_back((X.head<2>() / X.z() - o.uv_norm) * focal);
+  }
+  h.residual_correlation = detail::PooledLag1Correlation(along);
   h.median_px = UpperMedian(res);
   h.cost = detail::CappedMeanSquarePx2(res, options_.mapping.max_reprojection_px);
   h.observations = static_cast<int>(obs.size());
@@ -211,6 +216,7 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   const Pose ends[2] = {h.poses.front(), h.poses.back()};
   for (const Eigen::Vector3d& X : h.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
   const double refined_parallax = UpperMedian(parallax);
+  h.median_parallax_deg = refined_parallax;
   const double noise_px = NoiseFromMedianResidualPx(h.median_px);
   const double needed =
       std::max(io.min_median_parallax_deg, ParallaxForDepthNoiseDeg(noise_px, focal, io.max_relative_depth_noise));
@@ -220,19 +226,6 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
                             "asks for it)",
                             refined_parallax, needed, noise_px));
   return h;
-}
-
-double System::TrackResidualCorrelation(const std::vector<int>& window, const InitHypothesis& h) const {
-  std::unordered_map<int64_t, int> index;
-  for (size_t i = 0; i < h.point_ids.size(); ++i) index[h.point_ids[i]] = static_cast<int>(i);
-  std::vector<std::vector<Eigen::Vector2d>> residuals(h.points.size());  // per track, in window order (px)
-  for (size_t w = 0; w < window.size() && w < h.poses.size(); ++w)
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features)
-      if (auto it = index.find(f.id); it != index.end()) {
-        const Eigen::Vector3d X = h.poses[w] * h.points[it->second];
-        if (X.z() > 0) residuals[it->second].push_back((X.head<2>() / X.z() - ideal_.PixelToNormalized(f.uv_px)) * focal_px_);
-      }
-  return detail::PooledLag1Correlation(residuals);
 }
 
 std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<int>& window,
@@ -248,10 +241,7 @@ std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<i
   const Pose& last = winner.poses.back();
   if (used.size() < 8 || !(last.t.norm() > 0)) return {};
   // The valley's extent in rotation is about the angle the baseline subtends: the window's median parallax.
-  std::vector<double> parallax;
-  const Pose ends[2] = {winner.poses.front(), last};
-  for (const Eigen::Vector3d& X : winner.points) parallax.push_back(geometry::ParallaxDeg(ends, X));
-  const double radius_deg = UpperMedian(parallax);
+  const double radius_deg = winner.median_parallax_deg;
   if (!(radius_deg > 0)) return {};
   geometry::RefineOptions ro;
   ro.scale = focal_px_;
@@ -270,26 +260,17 @@ std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<i
   for (auto m = minima.begin(); m != minima.end(); ++m) {
     if (m == own || (m->cost - own->cost) / variance >= options_.init.ambiguity_chi2) continue;
     // Cheirality decides the translation's sign: the points of the winner's inliers in front of both views.
-    const Pose signs[2] = {m->cam2_from_cam1, Pose(m->cam2_from_cam1.q, -m->cam2_from_cam1.t)};
-    std::vector<Eigen::Vector3d> best_points;
-    std::vector<int64_t> best_ids;
+    geometry::InFrontOfBoth best;
     Pose best_pose;
-    for (const Pose& pose : signs) {
-      const Pose two[2] = {Pose(), pose};
-      std::vector<Eigen::Vector3d> points;
-      std::vector<int64_t> point_ids;
-      for (int i : used) {
-        const Eigen::Vector2d uv[2] = {n1[i], n2[i]};
-        const Eigen::Vector4d X = geometry::TriangulateHomogeneous(two, uv);
-        if (!(std::abs(X.w()) > 1e-12)) continue;
-        const Eigen::Vector3d P = X.head<3>() / X.w();
-        if (P.z() > 0 && (pose * P).z() > 0) points.push_back(P), point_ids.push_back(ids[i]);
-      }
-      if (points.size() > best_points.size()) best_points = std::move(points), best_ids = std::move(point_ids), best_pose = pose;
-    }
-    if (2 * best_points.size() < used.size()) continue;
+    for (const Pose& pose : {m->cam2_from_cam1, Pose(m->cam2_from_cam1.q, -m->cam2_from_cam1.t)})
+      if (geometry::InFrontOfBoth in_front = geometry::TriangulateInFrontOfBoth(pose, n1, n2, used);
+          in_front.indices.size() > best.indices.size())
+        best = std::move(in_front), best_pose = pose;
+    std::vector<int64_t> best_ids;
+    for (int i : best.indices) best_ids.push_back(ids[i]);
+    if (2 * best.indices.size() < used.size()) continue;
     // Refined whatever its parallax: short of it, it still stands against the winner in the ambiguity test.
-    std::optional<InitHypothesis> h = RefineInitWindow(window, best_pose, std::move(best_points), std::move(best_ids),
+    std::optional<InitHypothesis> h = RefineInitWindow(window, best_pose, std::move(best.points_in_cam1), std::move(best_ids),
                                                        nullptr, /*check_parallax=*/false);
     if (!h) continue;
     h->two_view_inliers = winner.two_view_inliers;
@@ -423,7 +404,7 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   // are not independent and the chi-square below, summed over them, overstates what the window tells. With the
   // lag-1 correlation rho of consecutive residuals along the tracks (of the best solution), n observations count
   // as n (1 - rho) / (1 + rho), the effective size of an AR(1) sample; rho < 0 counts as 0 (never bolder).
-  const double rho = std::clamp(TrackResidualCorrelation(window, *best), 0.0, 1.0);
+  const double rho = std::clamp(best->residual_correlation, 0.0, 1.0);
   const double effective = (1.0 - rho) / (1.0 + rho);
   for (const InitHypothesis& h : refined) {
     const bool distinct = DepthCorrelation(best->points, best->point_ids, h.points, h.point_ids) < kSameStructureCorrelation ||

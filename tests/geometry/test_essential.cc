@@ -267,7 +267,9 @@ TEST(RelativePoseMinima, FindTheTruthsBasinWhereOneRefinementEndsElsewhereInTheV
     // Sorted by cost; distinct by more than a tenth of the radius.
     for (size_t i = 0; i < minima.size(); ++i) {
       EXPECT_NEAR(minima[i].cam2_from_cam1.t.norm(), 1.0, 1e-9);
-      if (i > 0) EXPECT_LE(minima[i - 1].cost, minima[i].cost);
+      if (i > 0) {
+        EXPECT_LE(minima[i - 1].cost, minima[i].cost);
+      }
       for (size_t j = 0; j < i; ++j)
         EXPECT_GT(AngularDistanceDeg(minima[i].cam2_from_cam1.q, minima[j].cam2_from_cam1.q), radius_deg / 10);
     }

@@ -167,6 +167,34 @@ TEST(TriangulateDlt, BadInputFailsWithoutCrashing) {
       << r.failure;
 }
 
+// Cheirality of a two-view triangulation: at the true relative pose every point of the paper scene is in front of
+// both cameras (exact data) and comes back where it is; with the translation's sign flipped none is (each ray pair
+// then meets behind a camera); a parallel pair (at infinity) and a point behind the cameras are left out, and the
+// indices keep the order they were given in.
+TEST(TriangulateInFrontOfBoth, CheiralityDecidesTheTranslationsSign) {
+  const MultiView mv = PaperMultiView(1, {0, 15});
+  ASSERT_GE(mv.points_in_world.size(), 50u);
+  const Pose cam2_from_cam1 = mv.cam_from_world[1] * mv.cam_from_world[0].Inverse();
+  std::vector<Eigen::Vector2d> uv1, uv2;
+  for (const auto& obs : mv.uv_norm) uv1.push_back(obs[0]), uv2.push_back(obs[1]);
+  const InFrontOfBoth all = TriangulateInFrontOfBoth(cam2_from_cam1, uv1, uv2);
+  ASSERT_EQ(all.indices.size(), uv1.size());
+  for (size_t k = 0; k < all.indices.size(); ++k) {
+    EXPECT_EQ(all.indices[k], static_cast<int>(k));
+    const Eigen::Vector3d truth = mv.cam_from_world[0] * mv.points_in_world[k];
+    EXPECT_LT((all.points_in_cam1[k] - truth).norm(), 1e-9 * truth.norm());  // exact data: rounding only
+  }
+  const Pose flipped(cam2_from_cam1.q, -cam2_from_cam1.t);
+  EXPECT_TRUE(TriangulateInFrontOfBoth(flipped, uv1, uv2).indices.empty());
+  // A subset, out of order; one correspondence made parallel (at infinity) and one pointing behind the cameras.
+  uv2[3] = (cam2_from_cam1.q * uv1[3].homogeneous()).hnormalized();  // the same direction in both: infinitely far
+  const Eigen::Vector3d behind = -(mv.cam_from_world[0] * mv.points_in_world[5]);  // projects to uv1[5] too
+  uv2[5] = (cam2_from_cam1 * behind).hnormalized();
+  const std::vector<int> subset = {7, 3, 5, 2};
+  const InFrontOfBoth some = TriangulateInFrontOfBoth(cam2_from_cam1, uv1, uv2, subset);
+  EXPECT_EQ(some.indices, (std::vector<int>{7, 2}));
+}
+
 TEST(TriangulationOptions, CheckNamesTheBadField) {
   auto message = [](TriangulationOptions o) {
     try {
