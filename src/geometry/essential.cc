@@ -17,6 +17,7 @@
 #include <Eigen/SVD>
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 namespace mcslam::geometry {
 namespace {
@@ -345,8 +346,11 @@ std::vector<RelativePoseMinimum> RelativePoseMinima(const Pose& cam2_from_cam1, 
   // The refinements are independent: run in parallel, merged in the starts' order (the same minima as in turn).
   std::vector<Pose> refined(starts.size());
   std::vector<RefineSummary> summaries(starts.size());
-  tbb::parallel_for(size_t{0}, starts.size(), [&](size_t k) {
-    refined[k] = RefineRelativePose(starts[k], uv_norm1, uv_norm2, indices, options, &summaries[k]);
+  // Isolated: while it waits, the calling thread takes no unrelated task (the front end's) and returns on time.
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(size_t{0}, starts.size(), [&](size_t k) {
+      refined[k] = RefineRelativePose(starts[k], uv_norm1, uv_norm2, indices, options, &summaries[k]);
+    });
   });
   for (size_t k = 0; k < starts.size(); ++k) {
     const RefineSummary& summary = summaries[k];

@@ -58,7 +58,7 @@ Eigen::Vector4d TriangulateHomogeneous(std::span<const Pose> cam_from_world, std
 // The correspondences whose two-view DLT triangulation (camera 1 at the origin, camera 2 at cam2_from_cam1) lies
 // in front of both cameras: cheirality, which decides among the decompositions of an essential matrix and the sign
 // of a translation. Over `indices` (every correspondence when empty); a point at infinity says nothing and is left
-// out. The kept correspondences' indices, ascending as given, with their points in camera 1.
+// out. The kept correspondences' indices, in the order given, with their points in camera 1.
 struct InFrontOfBoth {
   std::vector<int> indices;
   std::vector<Eigen::Vector3d> points_in_cam1;

@@ -386,9 +386,10 @@ class System {
     bool eligible = true;
     bool parallax_ok = false;  // the refined window has the parallax asked for
     double median_parallax_deg = 0;  // of the points, between the window's first and last cameras
-    // The lag-1 correlation of the tracks' residuals between consecutive frames of the window, pooled over the
-    // tracks (detail::PooledLag1Correlation): about 0 for a tracker's independent noise, towards 1 for a bias
-    // that changes smoothly with the view.
+    // The lag-1 correlation of the tracks' residuals between a track's consecutive observations in the window
+    // (frames where it is missing or behind the camera skipped), pooled over the tracks
+    // (detail::PooledLag1Correlation): about 0 for a tracker's independent noise, towards 1 for a bias that
+    // changes smoothly with the view.
     double residual_correlation = 0;
   };
   // Places every frame of `window` by PnP against `points` (the last one at last_from_ref when given), refines
