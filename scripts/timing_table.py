@@ -10,11 +10,18 @@ import sys
 from collections import OrderedDict
 
 NAMES = {"demo": "demo 320x240", "kitti06": "KITTI 06 1241x376", "7scenes": "7-Scenes 640x480"}
-STAGES = [("frame_total", "frame (latency)"), ("decode", "read"), ("frontend_total", "front end"),
+STAGES = [("frame_total", "frame (latency)"), ("decode", "read (thread)"), ("read_wait", "read wait"),
+          ("frontend_total", "front end"),
           ("frontend_pyramid", "pyramid"), ("frontend_track", "LK + Kalman"), ("frontend_anchor", "anchor"),
           ("frontend_detect", "detect"), ("frontend_remap", "remap"), ("frontend_describe", "describe (task)"),
           ("frontend_describe_wait", "describe wait"), ("backend_total", "back end"), ("track", "pose step"),
           ("map", "map"), ("adjust", "adjust")]
+
+
+def RemapTries(report):
+    fe = report["frontend"]
+    tried = fe["remap_requests"] - fe["remap_refused_id"] - fe["remap_outside"] - fe.get("remap_deferred", 0)
+    return tried / max(report["frames"], 1)
 
 
 def main(runs_tsv, doc, commit, baseline_name=""):
@@ -31,7 +38,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
     columns = sorted(reports, key=lambda k: (sequences.index(k[0]), k[1] != "baseline"))
 
     def med(rs, stage, field="median_ms"):
-        vals = [r["stages_ms"][stage][field] for r in rs if r["stages_ms"][stage].get(field) is not None]
+        vals = [r["stages_ms"][stage][field] for r in rs
+                if stage in r["stages_ms"] and r["stages_ms"][stage].get(field) is not None]
         return statistics.median(vals) if vals else None
 
     def title(key):
@@ -47,6 +55,9 @@ def main(runs_tsv, doc, commit, baseline_name=""):
            "made, adjust on keyframes). The demo is the paper scenario rendered (seed 1, 300 frames); KITTI 06 has 51",
            "frames, 7-Scenes RedKitchen 300 (camera 525/525/320/240). The front end's description of new tracks runs",
            "as a task beside the back end (`describe (task)`); `describe wait` is what the next frame waited for it.",
+           "Frames are read and decoded on a thread of their own, ahead of the frame loop (`read (thread)`; a binary",
+           "without it read them in the loop); `read wait` is what the loop waited for a frame. `remap tries` counts",
+           "the lost map points looked for in a frame (remapping backs off from those it failed to find).",
            "`adjust` is the Monte Carlo point adjustment and the local bundle adjustment after each keyframe. The",
            "slowest frames are the initialisation's: the two-view start and, on the real sequences, the bundle",
            "adjustment that settles the first map's window (up to 120 frames refined together, once).", "",
@@ -66,6 +77,7 @@ def main(runs_tsv, doc, commit, baseline_name=""):
 
     rows = {"frame p99 (ms)": lambda rs: num(med(rs, 'frame_total', 'p99_ms'), ".1f"),
             "throughput (frames/s)": lambda rs: f"{statistics.median(r['fps'] for r in rs):.1f}",
+            "remap tries a frame": lambda rs: f"{statistics.median(RemapTries(r) for r in rs):.1f}",
             "front end / pose step": lambda rs: f"{med(rs, 'frontend_total') / med(rs, 'track'):.2f}",
             "tracked / frames": lambda rs: f"{rs[0]['tracked']} / {rs[0]['frames']}",
             "ATE (cm)": lambda rs: (f"{100 * rs[0]['ground_truth']['ate_m']['rmse']:.2f}"
@@ -75,7 +87,7 @@ def main(runs_tsv, doc, commit, baseline_name=""):
     out.append("")
     # What the frame's time goes to, from the figures above: the largest two of the parts that run one after the
     # other (read, front end, the pose step, map and adjust), and the slowest frame's time.
-    parts = [("decode", "reading the frame"), ("frontend_total", "the front end"), ("track", "the pose step"),
+    parts = [("read_wait", "waiting for the frame"), ("frontend_total", "the front end"), ("track", "the pose step"),
              ("map", "triangulation"), ("adjust", "the point and local bundle adjustment")]
     for k in columns:
         rs = reports[k]
