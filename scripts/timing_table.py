@@ -10,8 +10,7 @@ import sys
 from collections import OrderedDict
 
 NAMES = {"demo": "demo 320x240", "kitti06": "KITTI 06 1241x376", "7scenes": "7-Scenes 640x480"}
-STAGES = [("frame_total", "frame (latency)"), ("decode", "read (thread)"), ("read_wait", "read wait"),
-          ("frontend_total", "front end"),
+STAGES = [("frame_total", "frame (latency)"), ("decode", "read"), ("frontend_total", "front end"),
           ("frontend_pyramid", "pyramid"), ("frontend_track", "LK + Kalman"), ("frontend_anchor", "anchor"),
           ("frontend_detect", "detect"), ("frontend_remap", "remap"), ("frontend_describe", "describe (task)"),
           ("frontend_describe_wait", "describe wait"), ("backend_total", "back end"), ("track", "pose step"),
@@ -55,9 +54,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
            "made, adjust on keyframes). The demo is the paper scenario rendered (seed 1, 300 frames); KITTI 06 has 51",
            "frames, 7-Scenes RedKitchen 300 (camera 525/525/320/240). The front end's description of new tracks runs",
            "as a task beside the back end (`describe (task)`); `describe wait` is what the next frame waited for it.",
-           "Frames are read and decoded on a thread of their own, ahead of the frame loop (`read (thread)`; a binary",
-           "without it read them in the loop); `read wait` is what the loop waited for a frame. `remap tries` counts",
-           "the lost map points looked for in a frame (remapping backs off from those it failed to find).",
+           "`remap tries` counts the lost map points looked for in a frame (remapping backs off from those it failed",
+           "to find: docs/tuning.md).",
            "`adjust` is the Monte Carlo point adjustment and the local bundle adjustment after each keyframe. The",
            "slowest frames are the initialisation's: the two-view start and, on the real sequences, the bundle",
            "adjustment that settles the first map's window (up to 120 frames refined together, once).", "",
@@ -87,7 +85,7 @@ def main(runs_tsv, doc, commit, baseline_name=""):
     out.append("")
     # What the frame's time goes to, from the figures above: the largest two of the parts that run one after the
     # other (read, front end, the pose step, map and adjust), and the slowest frame's time.
-    parts = [("read_wait", "waiting for the frame"), ("frontend_total", "the front end"), ("track", "the pose step"),
+    parts = [("decode", "reading the frame"), ("frontend_total", "the front end"), ("track", "the pose step"),
              ("map", "triangulation"), ("adjust", "the point and local bundle adjustment")]
     for k in columns:
         rs = reports[k]

@@ -26,7 +26,6 @@
 #include "io/camera_io.h"
 #include "io/datasets.h"
 #include "io/ply.h"
-#include "io/prefetch_source.h"
 #include "io/trajectory_io.h"
 #include "pipeline/visual_slam.h"
 
@@ -301,8 +300,6 @@ void ImageRun::RunFrames() {
     }
   };
   try {
-    // The next frames are decoded on a thread of their own while this one is processed.
-    data.source = std::make_unique<io::PrefetchingSource>(std::move(data.source));
     io::Frame frame;
     while (!Interrupted()) {
       const auto t_frame = Clock::now();
@@ -311,7 +308,7 @@ void ImageRun::RunFrames() {
         break;
       }
       frames_decoded = frame.index + 1;
-      const double read_wait_ms = MsSince(t_frame);
+      const double decode_ms = MsSince(t_frame);
       if (frame.index < options.start) continue;
       if (options.end >= 0 && frame.index > options.end) break;
       ++frames_read;
@@ -319,8 +316,7 @@ void ImageRun::RunFrames() {
       row.index = frame.index;
       row.stamp_s = frame.stamp_s;
       row.name = frame.name;
-      row.decode_ms = frame.read_ms;
-      row.read_wait_ms = read_wait_ms;
+      row.decode_ms = decode_ms;
       if (frame.ok() && (frame.image.cols != camera.width || frame.image.rows != camera.height))
         frame.error = fmt::format("the image is {}x{} but the camera is {}x{}", frame.image.cols, frame.image.rows,
                                   camera.width, camera.height),

@@ -107,11 +107,11 @@ constexpr const char* kFrontEndColumns =
     "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
     "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
     "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-    "fe_remap_over_budget,fe_remap_deferred,fe_refreshed,fe_jolt_recovered,decode_ms,read_wait_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,"
-    "fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
+    "fe_remap_over_budget,fe_remap_deferred,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,"
+    "fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
 
 // The cells of a frame the reader could not decode, column by column (so that they follow the column lists):
-// its index and stamp, status "skipped", the decoding's, the wait for it and the whole frame's time; the counts 0; what was never
+// its index and stamp, status "skipped", the decoding's and the whole frame's time; the counts 0; what was never
 // measured (the other times, residuals, errors, scores, the pose's sigmas) empty.
 std::string SkippedCells(const FrameRow& row) {
   const std::string columns = std::string(kBackEndColumns) + ',' + kFrontEndColumns;
@@ -132,8 +132,6 @@ std::string SkippedCells(const FrameRow& row) {
       out += "skipped";
     else if (name == "decode_ms")
       out += fmt::format("{:.3f}", row.decode_ms);
-    else if (name == "read_wait_ms")
-      out += fmt::format("{:.3f}", row.read_wait_ms);
     else if (name == "frame_ms")
       out += fmt::format("{:.3f}", row.frame_ms);
     else if (!(ends_with("_ms") || name.starts_with("reproj_") || name.starts_with("sigma_") || name == "score" ||
@@ -165,13 +163,12 @@ std::string FrontEndCells(const FrameRow& row) {
   const frontend::FrameStats& s = row.fe;
   return fmt::format(
       "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
-      "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f}",
+      "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f}",
       row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward, s.lost_patch_error,
       s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered,
       s.remap_requests, s.remapped, s.remap_refused_id, s.remap_outside, s.remap_no_candidate, s.remap_no_match,
-      s.remap_over_budget, s.remap_deferred, s.refreshed, s.jolt_recovered, row.decode_ms, row.read_wait_ms,
-      row.backend_ms, s.convert_ms, s.pyramid_ms,
-      s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
+      s.remap_over_budget, s.remap_deferred, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms,
+      s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
 }
 
 }  // namespace
@@ -235,7 +232,7 @@ void ImageRun::WriteReport() {
   sum.interrupted = interrupted;
   sum.initialised = vslam->system().initialised();
   sum.localised = vslam->system().localised();
-  Stage decode, read_wait, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
+  Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_adjust_points, be_local_ba, be_local_ba_wait, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
           remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0;
@@ -243,7 +240,6 @@ void ImageRun::WriteReport() {
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
     decode.Add(row.decode_ms);
-    read_wait.Add(row.read_wait_ms);
     frame_total.Add(row.frame_ms);
     if (row.skipped) {
       ++sum.skipped;
@@ -358,7 +354,6 @@ void ImageRun::WriteReport() {
   // System::Process then, the successful call too). local_ba_wait: what the next frame waited for a local
   // adjustment solved beside it (MappingOptions::local_ba_async).
   stages = {{"decode", decode},
-            {"read_wait", read_wait},
             {"frontend_total", fe_total},
             {"frontend_convert", fe_convert},
             {"frontend_pyramid", fe_pyramid},

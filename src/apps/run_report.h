@@ -31,9 +31,7 @@ struct FrameRow {
   bool reloc_tried = false;
   int reloc_matches = 0, reloc_inliers = 0;
   double reloc_ms = 0;
-  // decode_ms: reading and decoding the frame (on the reader thread, io::PrefetchingSource); read_wait_ms: what
-  // the frame loop waited for it; frame_ms: from that wait's start to the frame's end.
-  double decode_ms = 0, read_wait_ms = 0, frame_ms = 0;
+  double decode_ms = 0, frame_ms = 0;
   double backend_ms = 0;     // System::Process, wall time
   bool before_init = false;  // the back end had no map when this frame came: its time is initialisation's
 };

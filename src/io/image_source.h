@@ -19,7 +19,6 @@ struct Frame {
   double stamp_s = 0;  // seconds (from the dataset's stamps, else index / fps)
   std::string name;    // the file it came from, or "<video>#<index>"
   std::string error;   // why the image is empty; empty when the frame is fine
-  double read_ms = 0;  // time to read and decode it, where measured (PrefetchingSource)
   bool ok() const { return !image.empty(); }
 };
 
