@@ -17,6 +17,12 @@ STAGES = [("frame_total", "frame (latency)"), ("decode", "read"), ("frontend_tot
           ("map", "map"), ("adjust", "adjust")]
 
 
+def RemapTries(report):
+    fe = report["frontend"]
+    tried = fe["remap_requests"] - fe["remap_refused_id"] - fe["remap_outside"] - fe.get("remap_deferred", 0)
+    return tried / max(report["frames"], 1)
+
+
 def main(runs_tsv, doc, commit, baseline_name=""):
     reports = OrderedDict()  # (name, label) -> reports
     for line in open(runs_tsv):
@@ -31,7 +37,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
     columns = sorted(reports, key=lambda k: (sequences.index(k[0]), k[1] != "baseline"))
 
     def med(rs, stage, field="median_ms"):
-        vals = [r["stages_ms"][stage][field] for r in rs if r["stages_ms"][stage].get(field) is not None]
+        vals = [r["stages_ms"][stage][field] for r in rs
+                if stage in r["stages_ms"] and r["stages_ms"][stage].get(field) is not None]
         return statistics.median(vals) if vals else None
 
     def title(key):
@@ -47,6 +54,8 @@ def main(runs_tsv, doc, commit, baseline_name=""):
            "made, adjust on keyframes). The demo is the paper scenario rendered (seed 1, 300 frames); KITTI 06 has 51",
            "frames, 7-Scenes RedKitchen 300 (camera 525/525/320/240). The front end's description of new tracks runs",
            "as a task beside the back end (`describe (task)`); `describe wait` is what the next frame waited for it.",
+           "`remap tries` counts the lost map points looked for in a frame (remapping backs off from those it failed",
+           "to find: docs/tuning.md).",
            "`adjust` is the Monte Carlo point adjustment and the local bundle adjustment after each keyframe. The",
            "slowest frames are the initialisation's: the two-view start and, on the real sequences, the bundle",
            "adjustment that settles the first map's window (up to 120 frames refined together, once).", "",
@@ -66,6 +75,7 @@ def main(runs_tsv, doc, commit, baseline_name=""):
 
     rows = {"frame p99 (ms)": lambda rs: num(med(rs, 'frame_total', 'p99_ms'), ".1f"),
             "throughput (frames/s)": lambda rs: f"{statistics.median(r['fps'] for r in rs):.1f}",
+            "remap tries a frame": lambda rs: f"{statistics.median(RemapTries(r) for r in rs):.1f}",
             "front end / pose step": lambda rs: f"{med(rs, 'frontend_total') / med(rs, 'track'):.2f}",
             "tracked / frames": lambda rs: f"{rs[0]['tracked']} / {rs[0]['frames']}",
             "ATE (cm)": lambda rs: (f"{100 * rs[0]['ground_truth']['ate_m']['rmse']:.2f}"

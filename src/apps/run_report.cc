@@ -107,8 +107,8 @@ constexpr const char* kFrontEndColumns =
     "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
     "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
     "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-    "fe_remap_over_budget,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,fe_pyramid_ms,fe_track_ms,"
-    "fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
+    "fe_remap_over_budget,fe_remap_deferred,fe_refreshed,fe_jolt_recovered,decode_ms,backend_ms,fe_convert_ms,"
+    "fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
 
 // The cells of a frame the reader could not decode, column by column (so that they follow the column lists):
 // its index and stamp, status "skipped", the decoding's and the whole frame's time; the counts 0; what was never
@@ -162,13 +162,13 @@ std::string BackEndCells(const slam::FrameReport& r, const std::map<int64_t, con
 std::string FrontEndCells(const FrameRow& row) {
   const frontend::FrameStats& s = row.fe;
   return fmt::format(
-      "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
+      "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},"
       "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f}",
       row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward, s.lost_patch_error,
       s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered,
       s.remap_requests, s.remapped, s.remap_refused_id, s.remap_outside, s.remap_no_candidate, s.remap_no_match,
-      s.remap_over_budget, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms, s.pyramid_ms,
-      s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
+      s.remap_over_budget, s.remap_deferred, s.refreshed, s.jolt_recovered, row.decode_ms, row.backend_ms, s.convert_ms,
+      s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
 }
 
 }  // namespace
@@ -235,7 +235,7 @@ void ImageRun::WriteReport() {
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_adjust_points, be_local_ba, be_local_ba_wait, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
-          remap_over_budget = 0, remap_refused = 0, refreshed = 0;
+          remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0;
   double features_sum = 0;
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
@@ -253,7 +253,7 @@ void ImageRun::WriteReport() {
     remap_requests += row.fe.remap_requests, remapped += row.fe.remapped;
     remap_outside += row.fe.remap_outside, remap_no_candidate += row.fe.remap_no_candidate;
     remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
-    remap_refused += row.fe.remap_refused_id;
+    remap_refused += row.fe.remap_refused_id, remap_deferred += row.fe.remap_deferred;
     refreshed += row.fe.refreshed;
     be_total.Add(row.backend_ms);
     // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
@@ -327,6 +327,7 @@ void ImageRun::WriteReport() {
                    {"remap_no_candidate", remap_no_candidate},
                    {"remap_no_match", remap_no_match},
                    {"remap_over_budget", remap_over_budget},
+                   {"remap_deferred", remap_deferred},
                    {"descriptors_refreshed", refreshed}};
   {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's

@@ -130,6 +130,11 @@ struct RemapRequest {
   int64_t feature_id = 0;                           // the id its track had (from this front end)
   Descriptor descriptor{};                          // from when it was tracked (Frontend::GetDescriptor, LostTrack)
   Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // projection in this frame (distorted pixels)
+  // Backed off (the caller failed to find it many times here): tried only when a corner that would start a new
+  // track in this frame lies in its window, i.e. something appeared where it should be (the end of an
+  // occlusion); otherwise it costs nothing and counts as deferred. A new track would take that corner, and a
+  // corner taken by a track is never a remapping candidate.
+  bool only_near_new_corner = false;
 };
 
 struct TrackedFeature {
@@ -166,6 +171,7 @@ struct FrameStats {
   int remap_no_candidate = 0;  // no new corner in the window
   int remap_no_match = 0;      // candidates, but none passed the distance and ratio tests
   int remap_over_budget = 0;   // matched, but the tracks already number max_features
+  int remap_deferred = 0;      // backed off and no new corner in the window: not tried (RemapRequest)
   // Mean distance of the surviving tracks from where LK started (the Kalman prediction) and from where they
   // were in the previous frame: how much the prediction saves LK.
   double mean_prediction_error_px = 0;

@@ -23,6 +23,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   for (const Track& t : tracks) live_ids.insert(t.id);
   std::unordered_set<int64_t> seen_ids;
   std::vector<const RemapRequest*> requests;
+  std::vector<const RemapRequest*> deferred;  // only_near_new_corner: decided once the new corners are known
   st.remap_requests = static_cast<int>(remap.size());
   const double rb = o.border_px;
   for (const RemapRequest& r : remap) {
@@ -33,14 +34,15 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
                r.uv_px.y() > H - 1 - rb) {
       ++st.remap_outside;
     } else {
-      requests.push_back(&r);
+      (r.only_near_new_corner ? deferred : requests).push_back(&r);
     }
   }
 
   const int budget = o.max_features - static_cast<int>(tracks.size());
   bool any_empty_cell = false;
   for (int c : occupancy) any_empty_cell |= c == 0;
-  if ((budget <= 0 || !any_empty_cell) && requests.empty()) {
+  if ((budget <= 0 || !any_empty_cell) && requests.empty()) {  // no new corner: every deferred request waits
+    st.remap_deferred = static_cast<int>(deferred.size());
     st.detect_ms = MsSince(t_detect);
     return;
   }
@@ -126,6 +128,21 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
       fresh.push_back(k);
       ++per_cell[static_cast<size_t>(c.cell)];
       accepted_in_cell[static_cast<size_t>(c.cell)].push_back(k);
+    }
+  }
+  // A deferred request is tried when a new corner lies in its window (the corners in it are then its candidates
+  // as for any request), and waits otherwise.
+  {
+    const float hw = static_cast<float>(o.remap_window_px);
+    for (const RemapRequest* r : deferred) {
+      const float u = static_cast<float>(r->uv_px.x()), v = static_cast<float>(r->uv_px.y());
+      const bool near_new = std::any_of(fresh.begin(), fresh.end(), [&](size_t k) {
+        return std::abs(candidates[k].uv.x - u) <= hw && std::abs(candidates[k].uv.y - v) <= hw;
+      });
+      if (near_new)
+        requests.push_back(r);
+      else
+        ++st.remap_deferred;
     }
   }
   st.detect_ms = MsSince(t_detect);

@@ -21,12 +21,27 @@ double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 
 bool Removed(const slam::MapPoint* p) { return !p || p->state == slam::PointState::kRemoved; }
 
+// The late tries' counts forget with a half-life of ~140 frames (a run that turns from slow to quick motion
+// stops backing off within a few seconds).
+constexpr double kLateTriesDecay = 0.995;
+
 }  // namespace
 
 void VisualSlamOptions::Check() const {
   system.Check();
   if (max_remap_requests < 0)
     throw std::invalid_argument(fmt::format("max_remap_requests must be >= 0, got {}", max_remap_requests));
+  if (remap_tries_every_frame < 0)
+    throw std::invalid_argument(fmt::format("remap_tries_every_frame must be >= 0, got {}", remap_tries_every_frame));
+  if (remap_retry_every < 1)
+    throw std::invalid_argument(fmt::format("remap_retry_every must be >= 1, got {}", remap_retry_every));
+  if (!(remap_backoff_below >= 0 && remap_backoff_below <= 1))
+    throw std::invalid_argument(fmt::format("remap_backoff_below must be in [0, 1], got {}", remap_backoff_below));
+  if (remap_backoff_min_inliers < 0)
+    throw std::invalid_argument(
+        fmt::format("remap_backoff_min_inliers must be >= 0, got {}", remap_backoff_min_inliers));
+  if (!(remap_backoff_evidence >= 0))
+    throw std::invalid_argument(fmt::format("remap_backoff_evidence must be >= 0, got {}", remap_backoff_evidence));
   if (max_relocalisation_points < 0)
     throw std::invalid_argument(
         fmt::format("max_relocalisation_points must be >= 0, got {}", max_relocalisation_points));
@@ -135,10 +150,14 @@ void VisualSlam::LoadMap(const io::MapFile& map) {
 }
 
 // Lost map points projected with the latest pose, the most recently seen first: the front end looks for them
-// near there (§6.4).
-std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
+// near there (§6.4). Those it failed to find many times since they came into view are backed off while such late
+// tries rarely succeed (VisualSlamOptions::remap_tries_every_frame): looked for now and then, or where a new
+// corner appears near them (RemapRequest::only_near_new_corner).
+std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() {
   std::vector<frontend::RemapRequest> requests;
+  late_requested_.clear();
   if (!system_.initialised() || !latest_cam_from_world_) return requests;
+  const int64_t now = frames_processed_;
   std::vector<std::pair<int64_t, const slam::MapPoint*>> lost_points;
   // While a provisional map is tracked, the latest pose is at its scale: the rest of the map would be looked for
   // in the wrong places (and found there, wrongly); it is found by relocalisation instead.
@@ -148,19 +167,49 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() const {
   std::sort(lost_points.begin(), lost_points.end(), [](const auto& a, const auto& b) {
     return a.first > b.first || (a.first == b.first && a.second->id < b.second->id);
   });
+  const bool back_off = latest_inliers_ >= options_.remap_backoff_min_inliers &&
+                        late_tries_ >= options_.remap_backoff_evidence &&
+                        late_found_ < options_.remap_backoff_below * late_tries_;
   for (const auto& [seen, p] : lost_points) {
-    if (requests.size() >= static_cast<size_t>(options_.max_remap_requests)) break;
     Eigen::Vector2d uv;
     if (!system_.camera().ProjectWorld(*latest_cam_from_world_, p->position_in_world, &uv) ||
         !system_.camera().InImage(uv, options_.frontend.border_px))
       continue;
-    requests.push_back({p->id, lost_descriptors_.at(p->id), uv});
+    // Every point in view is noted, requested or not: one that was out of view (or tracked) in the frame
+    // before came back and is tried afresh.
+    RemapTries& tries = remap_tries_[p->id];
+    if (tries.in_view_at != now - 1) tries.failures = 0;
+    tries.in_view_at = now;
+    if (requests.size() >= static_cast<size_t>(options_.max_remap_requests)) continue;
+    const bool late = tries.failures >= options_.remap_tries_every_frame;
+    const bool deferred = late && back_off && (now + p->id) % options_.remap_retry_every != 0;
+    if (late && !deferred) late_requested_.insert(p->id);
+    requests.push_back({p->id, lost_descriptors_.at(p->id), uv, deferred});
   }
+  // Only the points in view now keep their count (the map's size stays that of the view).
+  std::erase_if(remap_tries_, [&](const auto& kv) { return kv.second.in_view_at != now; });
   return requests;
+}
+
+void VisualSlam::CountRemapTries(std::span<const frontend::RemapRequest> requests, const frontend::FrameResult& fr) {
+  const std::unordered_set<int64_t> found(fr.remapped_ids.begin(), fr.remapped_ids.end());
+  late_tries_ *= kLateTriesDecay;
+  late_found_ *= kLateTriesDecay;
+  for (int64_t id : late_requested_) {  // the deferred ones tried near a new corner are not counted: biased
+    late_tries_ += 1;
+    late_found_ += found.count(id);
+  }
+  for (const frontend::RemapRequest& r : requests) {
+    if (found.count(r.feature_id))
+      remap_tries_.erase(r.feature_id);
+    else if (auto it = remap_tries_.find(r.feature_id); it != remap_tries_.end())
+      ++it->second.failures;
+  }
 }
 
 VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double stamp_s) {
   VisualSlamStep step;
+  ++frames_processed_;
   const std::vector<frontend::RemapRequest> requests = RemapRequests();
   try {
     step.frontend = frontend_.Process(image, index, stamp_s, requests);
@@ -172,6 +221,7 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   for (const frontend::LostTrack& t : fr.lost)
     if (t.descriptor && !Removed(system_.map().Find(t.feature_id))) lost_descriptors_[t.feature_id] = *t.descriptor;
   for (int64_t id : fr.remapped_ids) lost_descriptors_.erase(id);
+  CountRemapTries(requests, fr);
 
   // The last keyframe's local bundle adjustment (local_ba_async) was solved while the front end ran: applied
   // before the map is matched or tracked against (its revised report comes with the System's next reports).
@@ -191,7 +241,7 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   step.backend_ms = MsSince(t_backend);
   KeepFirstLooks(obs);
   if (const slam::FrameReport* current = step.current()) {
-    if (current->has_pose) latest_cam_from_world_ = current->cam_from_world;
+    if (current->has_pose) latest_cam_from_world_ = current->cam_from_world, latest_inliers_ = current->inliers;
     was_lost_ = current->status == slam::FrameStatus::kLost;
   }
   return step;

@@ -10,8 +10,10 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -34,6 +36,27 @@ struct VisualSlamOptions {
   // Remap requests per frame at most (the most recently seen lost points first): each costs SIFT descriptions
   // of the corners in its window, and a point lost long ago is rarely found again.
   int max_remap_requests = 200;
+  // Remapping backs off from lost points that are in view but not found, where that pays: a point is looked
+  // for in every frame for its first `remap_tries_every_frame` failed tries since it came into view (out of
+  // view and back starts it afresh); past that ("late" tries), while fewer than `remap_backoff_below` of the
+  // late tries find their point (measured over the run, the latest frames weighing most, once at least
+  // `remap_backoff_evidence` late tries were counted), it is looked for in every `remap_retry_every`-th frame
+  // only (staggered by id: those tries go on measuring) and in the frames where a corner that would start a new
+  // track appears in its window (the end of an occlusion: the new track would take the corner for good).
+  // And only while the map is well fed: the latest pose had at least `remap_backoff_min_inliers` inliers (twice
+  // MappingOptions::starving_inliers); a thin map takes back every point it can.
+  // Measured over every remap request (docs/timing.md): a first try succeeds 33-35 % of the time on the demo
+  // and 7-Scenes (KITTI 1.8 %); after 10 failures 0.1 % (demo), 0.3 % (7-Scenes), none of KITTI's, and those
+  // late tries are most requests; on the fast scenario (pose inliers: median 32), where the short tracks of a
+  // quick camera block a lost point's corner for a while, about 1.3 % of them succeed, and re-found points keep
+  // its drift down: backing off there lost 30 % of the remaps and raised the ATE on 4 of 5 seeds, and with the
+  // success rate alone it backed off early in a run and seed 5 ended 46 cm off (6.7 cm without). At 1 %, about
+  // 100 tries (a few ms of SIFT) are spent on a point found again.
+  int remap_tries_every_frame = 10;
+  int remap_retry_every = 8;
+  double remap_backoff_below = 0.01;
+  double remap_backoff_evidence = 100;
+  int remap_backoff_min_inliers = 60;
   // Relocalisation compares each new track with this many lost map points at most, the most recently seen:
   // the cost of a try stays bounded however long the run (at 400 tracks, ~25 ms on 2 cores).
   int max_relocalisation_points = 2000;
@@ -82,7 +105,10 @@ class VisualSlam {
   // keyframe's, revised by its local bundle adjustment). Call it before reading the final map.
   std::vector<slam::FrameReport> Finish();
   // A frame that could not be read: the camera may have moved far meanwhile, so the next frame is relocalised.
-  void SkipFrame() { after_gap_ = true; }
+  void SkipFrame() {
+    after_gap_ = true;
+    ++frames_processed_;  // and remapping tries the points in view afresh
+  }
 
   // The map as a map file holds it (io/map_file.h; its options are the caller's to fill in): the points in
   // the map, each with its SIFT descriptor when one is known (its live track's, or the one kept since its track
@@ -100,7 +126,10 @@ class VisualSlam {
   const VisualSlamOptions& options() const { return options_; }
 
  private:
-  std::vector<frontend::RemapRequest> RemapRequests() const;
+  // The lost points to look for in this frame (remap_tries_ updated for which are in view).
+  std::vector<frontend::RemapRequest> RemapRequests();
+  // After the front end: the requests not re-attached count as failed tries.
+  void CountRemapTries(std::span<const frontend::RemapRequest> requests, const frontend::FrameResult& fr);
   void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step);
   // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
   void KeepFirstLooks(const FrameObservations& obs);
@@ -113,6 +142,19 @@ class VisualSlam {
   // Every map point's look when it joined the map (its track's descriptor then): relocalisation's second look.
   std::unordered_map<int64_t, frontend::Descriptor> first_descriptors_;
   std::optional<Pose> latest_cam_from_world_;
+  // Remapping's failed tries of each lost map point in view since it came into view (VisualSlamOptions'
+  // remap_tries_every_frame), and the last frame in which it was lost and in view; only points in view now.
+  struct RemapTries {
+    int failures = 0;
+    int64_t in_view_at = -2;
+  };
+  std::unordered_map<int64_t, RemapTries> remap_tries_;
+  // Late tries (remap_tries_every_frame failures or more) made in full, and those that found their point,
+  // both decayed a frame (visual_slam.cc: kLateTriesDecay); the ids of this frame's late requests.
+  double late_tries_ = 0, late_found_ = 0;
+  int latest_inliers_ = 0;  // of the latest posed frame
+  std::unordered_set<int64_t> late_requested_;
+  int64_t frames_processed_ = 0;  // Process and SkipFrame calls: remap_tries_' clock
   bool was_lost_ = false;
   bool after_gap_ = false;  // frames were skipped since the last one processed
 };

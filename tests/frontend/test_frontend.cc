@@ -481,6 +481,7 @@ struct RemapScene {
   int64_t b_id = -1;  // another feature, far from A
   Descriptor a_desc{}, b_desc{};
   Eigen::Vector2d a_at_frame3;
+  int occluder_half_px = 20;  // the occluder in frame 2 is a square of 2 * this + 1 px around A
 
   void Run(Frontend& fe) {
     const FrameResult r0 = fe.Process(tex.Frame(0, 0), 0, 0.0);
@@ -497,7 +498,8 @@ struct RemapScene {
     const Eigen::Vector2d a1 = ById(r1).at(a_id);
     cv::Mat f2 = tex.Frame(2 * step.x(), 2 * step.y());
     const cv::Point c(static_cast<int>(a1.x() + step.x()), static_cast<int>(a1.y() + step.y()));
-    f2(cv::Rect(c.x - 20, c.y - 20, 41, 41)).setTo(128);
+    const int h = occluder_half_px;
+    f2(cv::Rect(c.x - h, c.y - h, 2 * h + 1, 2 * h + 1)).setTo(128);
     const FrameResult r2 = fe.Process(f2, 2, 0.2);
     ASSERT_TRUE(Lost(r2, a_id));
     for (const auto& l : r2.lost)
@@ -573,6 +575,44 @@ TEST(Frontend, RemapRefusesOutsideTheWindowTheImageOrForALiveId) {
   const FrameResult r = fe2.Process(scene2.Frame3(), 3, 0.3, std::span<const RemapRequest>(&out, 1));
   EXPECT_EQ(r.stats.remap_outside, 1);
   EXPECT_TRUE(r.remapped_ids.empty());
+}
+
+// A backed-off request (RemapRequest::only_near_new_corner) costs nothing while nothing new appears where it
+// should be, and is tried as any request when a corner that would start a new track appears in its window.
+TEST(Frontend, ABackedOffRequestIsTriedOnlyWhereANewCornerAppears) {
+  {  // the occluder stays: the window holds no new corner
+    RemapScene scene;
+    Frontend fe;
+    ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+    cv::Mat f3 = scene.Frame3();
+    const cv::Point c(static_cast<int>(scene.a_at_frame3.x()), static_cast<int>(scene.a_at_frame3.y()));
+    f3(cv::Rect(c.x - 20, c.y - 20, 41, 41)).setTo(128);
+    RemapRequest req{scene.a_id, scene.a_desc, scene.a_at_frame3, true};
+    const FrameResult deferred = fe.Process(f3, 3, 0.3, std::span<const RemapRequest>(&req, 1));
+    EXPECT_EQ(deferred.stats.remap_requests, 1);
+    EXPECT_EQ(deferred.stats.remap_deferred, 1);
+    EXPECT_EQ(deferred.stats.remap_no_candidate + deferred.stats.remap_no_match, 0);
+    EXPECT_TRUE(deferred.remapped_ids.empty());
+    // The same request not backed off is tried (and fails: nothing to find under the occluder).
+    req.only_near_new_corner = false;
+    const FrameResult tried = fe.Process(f3, 4, 0.4, std::span<const RemapRequest>(&req, 1));
+    EXPECT_EQ(tried.stats.remap_deferred, 0);
+    EXPECT_EQ(tried.stats.remap_no_candidate + tried.stats.remap_no_match, 1);
+  }
+  {  // the occluder (larger: every track of A's cell went) went: A's corner is new in an empty cell, and A
+     // takes it instead of a new track
+    RemapScene scene;
+    scene.occluder_half_px = 60;
+    Frontend fe;
+    ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+    const RemapRequest req{scene.a_id, scene.a_desc, scene.a_at_frame3 + Eigen::Vector2d(4, -3), true};
+    const FrameResult r3 = fe.Process(scene.Frame3(), 3, 0.3, std::span<const RemapRequest>(&req, 1));
+    EXPECT_EQ(r3.stats.remap_deferred, 0);
+    ASSERT_EQ(r3.remapped_ids, std::vector<int64_t>{scene.a_id});
+    const TrackedFeature* f = Find(r3, scene.a_id);
+    ASSERT_NE(f, nullptr);
+    EXPECT_LT((f->uv_px - scene.a_at_frame3).norm(), 1.5);  // as for a request not backed off
+  }
 }
 
 // ---- output ---------------------------------------------------------------------------------------------
