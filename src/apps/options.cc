@@ -105,6 +105,11 @@ void PoseFlags::Add(CLI::App* cmd) {
                   "(0: no second try)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
+  cmd->add_option("--retry-max-residual-ratio", tracker.retry_max_residual_ratio,
+                  "The wider second try's pose is kept only when its inliers' median residual is at most this many "
+                  "times the recent frames' (0: kept whenever enough points agree)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   cmd->add_option("--sigma-trans-floor", tracker.sigma_trans_floor_m, "Floor of the translation spread, metres")
       ->check(Positive())
       ->capture_default_str();

@@ -8,6 +8,16 @@
 #include <fmt/format.h>
 
 namespace mcslam::slam {
+namespace {
+
+double Median(std::vector<double>* v) {  // 0 for none
+  if (v->empty()) return 0.0;
+  const auto mid = v->begin() + v->size() / 2;
+  std::nth_element(v->begin(), mid, v->end());
+  return *mid;
+}
+
+}  // namespace
 
 RandomMode ParseRandomMode(const std::string& name) {
   if (name == "table") return RandomMode::kTable;
@@ -38,6 +48,12 @@ void PoseTrackerOptions::Check() const {
   if (!(round_shrink > 0 && round_shrink <= 1)) fail(fmt::format("round_shrink must be in (0, 1], got {}", round_shrink));
   if (!(retry_rot_scale == 0 || (retry_rot_scale > 1 && retry_rot_scale <= 100)))
     fail(fmt::format("retry_rot_scale must be 0 (no retry) or in (1, 100], got {}", retry_rot_scale));
+  if (!(retry_max_residual_ratio >= 0 && retry_max_residual_ratio <= 1e3))
+    fail(fmt::format("retry_max_residual_ratio must be in [0, 1000], got {}", retry_max_residual_ratio));
+  if (!(retry_max_residual_fraction > 0 && retry_max_residual_fraction <= 1))
+    fail(fmt::format("retry_max_residual_fraction must be in (0, 1], got {}", retry_max_residual_fraction));
+  if (!(retry_min_typical_fraction >= 0 && retry_min_typical_fraction <= 1))
+    fail(fmt::format("retry_min_typical_fraction must be in [0, 1], got {}", retry_min_typical_fraction));
 }
 
 std::string PoseTrackerOptions::LostReason(int inliers, int scoring_inliers, int scored) const {
@@ -151,11 +167,20 @@ bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma
   est->cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
   est->score = best.score;
   est->inliers = ClassifyInliers(est->cam_from_world, obs, residuals, inliers);
-  double sum = 0;
+  std::vector<double> in;
+  in.reserve(est->inliers);
   for (size_t i = 0; i < obs.size(); ++i)
-    if ((*inliers)[i]) sum += (*residuals)[i];
-  est->mean_inlier_residual_px = est->inliers > 0 ? sum / est->inliers : 0.0;
+    if ((*inliers)[i]) in.push_back((*residuals)[i]);
+  double sum = 0;
+  for (double r : in) sum += r;
+  est->mean_inlier_residual_px = in.empty() ? 0.0 : sum / in.size();
+  est->median_inlier_residual_px = Median(&in);
   return true;
+}
+
+double PoseTracker::TypicalResidualPx() const {
+  std::vector<double> v = recent_median_residuals_;
+  return Median(&v);
 }
 
 PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,
@@ -203,10 +228,36 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     std::vector<uint8_t> wide_inliers;
     if (Score(prev, m, options_.retry_rot_scale * sigma_rot_deg, obs, &wide, &wide_residuals, &wide_inliers) &&
         (wide.lost_reason = options_.LostReason(wide.inliers, ScoringInliers(obs, wide_inliers), wide.scored)).empty()) {
-      est = wide;
-      *residuals = std::move(wide_residuals);
-      *inliers = std::move(wide_inliers);
-      est.widened = true;
+      // Refine about the wide winner at the normal spread (its centre is one of the hypotheses, so the score
+      // can only improve); then the residual check (PoseTrackerOptions::retry_max_residual_ratio).
+      PoseEstimate fine = wide;
+      std::vector<double> fine_residuals;
+      std::vector<uint8_t> fine_inliers;
+      const Eigen::Vector3d fine_dt = LinearisedTranslation(wide.cam_from_world, obs);
+      fine.sigma_t = (options_.sigma_trans_scale * fine_dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+      if (Score(wide.cam_from_world, m, sigma_rot_deg, obs, &fine, &fine_residuals, &fine_inliers) &&
+          fine.score <= wide.score &&
+          options_.LostReason(fine.inliers, ScoringInliers(obs, fine_inliers), fine.scored).empty()) {
+        fine.sigma_t = wide.sigma_t;
+        wide = fine;
+        wide_residuals = std::move(fine_residuals);
+        wide_inliers = std::move(fine_inliers);
+      }
+      const double threshold = options_.inlier_threshold_px;
+      const double typical = std::max(TypicalResidualPx(), options_.retry_min_typical_fraction * threshold);
+      const double limit =
+          std::min(options_.retry_max_residual_ratio * typical, options_.retry_max_residual_fraction * threshold);
+      if (options_.retry_max_residual_ratio > 0 && wide.median_inlier_residual_px > limit) {
+        est.lost_reason += fmt::format(
+            "; the {:g}x wider rotation spread found {} inliers fitting to a median of {:.2f} px, the recent frames "
+            "to {:.2f} px: refused",
+            options_.retry_rot_scale, wide.inliers, wide.median_inlier_residual_px, TypicalResidualPx());
+      } else {
+        est = wide;
+        *residuals = std::move(wide_residuals);
+        *inliers = std::move(wide_inliers);
+        est.widened = true;
+      }
     }
   }
   if (!est.lost_reason.empty()) {
@@ -215,6 +266,11 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   }
   est.tracked = true;
   est.keyframe = est.inliers >= options_.keyframe_min_inlier_ratio * est.scored;
+  if (!est.widened) {
+    if (recent_median_residuals_.size() == kTypicalFrames)
+      recent_median_residuals_.erase(recent_median_residuals_.begin());
+    recent_median_residuals_.push_back(est.median_inlier_residual_px);
+  }
   last_rotation_deg_ = AngularDistanceDeg(prev.q, est.cam_from_world.q);
   return est;
 }

@@ -60,6 +60,18 @@ struct PoseTrackerOptions {
   // going straight: rendered forward seed 10 was lost for good at its bend's first frame, fast seed 5 at frame
   // 9. The second try costs one more scoring, on lost frames only.
   double retry_rot_scale = 4.0;
+  // The second try searches a far larger volume with the same hypotheses, so its best can be a wrong pose that
+  // a little over half of the points happen to fit loosely (after a gap of 30 frames: 27 of 46 points, 47 cm
+  // off, their median residual 2.3 px where the tracker's frames had 0.07). Its winner is first refined by one
+  // scoring at the normal spread about it, then kept only when its inliers' median residual is at most
+  // retry_max_residual_ratio times the tracker's typical one (the median, over its last tracked frames, of each
+  // frame's inlier median), and never above retry_max_residual_fraction of inlier_threshold_px (inliers spread
+  // evenly over the threshold's disc, as a chance fit's do, have a median of 0.71 of it). The typical residual
+  // counts as at least retry_min_typical_fraction of the threshold, so that a noiseless run's is not a needle's
+  // eye. 0 ratio: no check.
+  double retry_max_residual_ratio = 3.0;
+  double retry_max_residual_fraction = 0.5;
+  double retry_min_typical_fraction = 0.1;
   void Check() const;                  // throws std::invalid_argument naming the bad field
   // Why an estimate is no pose; empty when it is one. `inliers`: observations within the threshold (against
   // min_inliers); `scoring_inliers` of the `scored` points (against min_inlier_ratio).
@@ -81,6 +93,7 @@ struct PoseEstimate {
   int inliers = 0;               // observations with residual under the threshold at the best pose
   double score = 0;              // best summed distance (px)
   double mean_inlier_residual_px = 0;
+  double median_inlier_residual_px = 0;
   Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();  // the translation spread used (m)
   std::string lost_reason;       // why, when not tracked
   bool widened = false;          // tracked at the second try, with the wider rotation spread (retry_rot_scale)
@@ -131,6 +144,10 @@ class PoseTracker {
   std::vector<float> sx_, sy_, sz_, su_, sv_;
   // Rotation between the previous pose and the estimate of the last tracked frame (0 after a lost one).
   double last_rotation_deg_ = 0;
+  // Median inlier residual (px) of the last tracked frames, oldest first (at most kTypicalFrames).
+  static constexpr size_t kTypicalFrames = 20;
+  std::vector<double> recent_median_residuals_;
+  double TypicalResidualPx() const;  // their median; 0 when none
 };
 
 }  // namespace mcslam::slam
