@@ -79,6 +79,7 @@ PoseTracker::PoseTracker(const PinholeCamera& camera, const PoseTrackerOptions& 
   options_.Check();
   if (!kernel_) throw std::invalid_argument("pose tracker: no compute kernel");
   table_ = compute::NormalTable(options_.hypotheses, options_.seed, /*stream=*/1);
+  recent_median_residuals_.reserve(kTypicalFrames);
 }
 
 void PoseTracker::SetTranslationFloor(double sigma_trans_floor_m) {
@@ -167,8 +168,8 @@ bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma
   est->cam_from_world = Pose(q_best, Eigen::Vector3d(best.t[0], best.t[1], best.t[2]) - q_best.normalized() * m);
   est->score = best.score;
   est->inliers = ClassifyInliers(est->cam_from_world, obs, residuals, inliers);
-  std::vector<double> in;
-  in.reserve(est->inliers);
+  std::vector<double>& in = scratch_;  // no allocation per frame once warm
+  in.clear();
   for (size_t i = 0; i < obs.size(); ++i)
     if ((*inliers)[i]) in.push_back((*residuals)[i]);
   double sum = 0;
@@ -178,9 +179,9 @@ bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma
   return true;
 }
 
-double PoseTracker::TypicalResidualPx() const {
-  std::vector<double> v = recent_median_residuals_;
-  return Median(&v);
+double PoseTracker::TypicalResidualPx() {
+  scratch_.assign(recent_median_residuals_.begin(), recent_median_residuals_.end());
+  return Median(&scratch_);
 }
 
 PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,

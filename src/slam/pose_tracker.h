@@ -147,7 +147,8 @@ class PoseTracker {
   // Median inlier residual (px) of the last tracked frames, oldest first (at most kTypicalFrames).
   static constexpr size_t kTypicalFrames = 20;
   std::vector<double> recent_median_residuals_;
-  double TypicalResidualPx() const;  // their median; 0 when none
+  double TypicalResidualPx();  // their median; 0 when none
+  std::vector<double> scratch_;  // inlier residuals of a scoring, or the recent medians being sorted
 };
 
 }  // namespace mcslam::slam
