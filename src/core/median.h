@@ -5,13 +5,15 @@
 
 namespace mcslam {
 
-// The element of rank n/2 (the upper of the two middle ones when n is even): always a value of the set.
-inline double UpperMedian(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
-  return v[mid];
+// The element of rank n/2 (the upper of the two middle ones when n is even): always a value of the set. The
+// in-place form reorders *v and allocates nothing (for per-frame paths that reuse a buffer).
+inline double UpperMedianInPlace(std::vector<double>* v) {
+  if (v->empty()) return 0.0;
+  const size_t mid = v->size() / 2;
+  std::nth_element(v->begin(), v->begin() + static_cast<std::ptrdiff_t>(mid), v->end());
+  return (*v)[mid];
 }
+inline double UpperMedian(std::vector<double> v) { return UpperMedianInPlace(&v); }
 
 // The median proper: the mean of the two middle values when n is even.
 inline double Median(std::vector<double> v) {

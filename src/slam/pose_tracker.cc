@@ -7,17 +7,9 @@
 #include <Eigen/Dense>
 #include <fmt/format.h>
 
+#include "core/median.h"
+
 namespace mcslam::slam {
-namespace {
-
-double Median(std::vector<double>* v) {  // 0 for none
-  if (v->empty()) return 0.0;
-  const auto mid = v->begin() + v->size() / 2;
-  std::nth_element(v->begin(), mid, v->end());
-  return *mid;
-}
-
-}  // namespace
 
 RandomMode ParseRandomMode(const std::string& name) {
   if (name == "table") return RandomMode::kTable;
@@ -175,13 +167,13 @@ bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma
   double sum = 0;
   for (double r : in) sum += r;
   est->mean_inlier_residual_px = in.empty() ? 0.0 : sum / in.size();
-  est->median_inlier_residual_px = Median(&in);
+  est->median_inlier_residual_px = UpperMedianInPlace(&in);
   return true;
 }
 
 double PoseTracker::TypicalResidualPx() {
   scratch_.assign(recent_median_residuals_.begin(), recent_median_residuals_.end());
-  return Median(&scratch_);
+  return UpperMedianInPlace(&scratch_);
 }
 
 PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,
@@ -245,14 +237,15 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
         wide_inliers = std::move(fine_inliers);
       }
       const double threshold = options_.inlier_threshold_px;
-      const double typical = std::max(TypicalResidualPx(), options_.retry_min_typical_fraction * threshold);
+      const double recent = TypicalResidualPx();
+      const double typical = std::max(recent, options_.retry_min_typical_fraction * threshold);
       const double limit =
           std::min(options_.retry_max_residual_ratio * typical, options_.retry_max_residual_fraction * threshold);
       if (options_.retry_max_residual_ratio > 0 && wide.median_inlier_residual_px > limit) {
         est.lost_reason += fmt::format(
             "; the {:g}x wider rotation spread found {} inliers fitting to a median of {:.2f} px, the recent frames "
             "to {:.2f} px: refused",
-            options_.retry_rot_scale, wide.inliers, wide.median_inlier_residual_px, TypicalResidualPx());
+            options_.retry_rot_scale, wide.inliers, wide.median_inlier_residual_px, recent);
       } else {
         est = wide;
         *residuals = std::move(wide_residuals);
