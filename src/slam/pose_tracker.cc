@@ -171,6 +171,12 @@ bool PoseTracker::Score(const Pose& prev, const Eigen::Vector3d& m, double sigma
   return true;
 }
 
+double PoseTracker::FitLimitPx(double recent) const {
+  const double threshold = options_.inlier_threshold_px;
+  const double typical = std::max(recent, options_.retry_min_typical_fraction * threshold);
+  return std::min(options_.retry_max_residual_ratio * typical, options_.retry_max_residual_fraction * threshold);
+}
+
 double PoseTracker::TypicalResidualPx() {
   scratch_.assign(recent_median_residuals_.begin(), recent_median_residuals_.end());
   return UpperMedianInPlace(&scratch_);
@@ -215,6 +221,18 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
   if (!Score(prev, m, sigma_rot_deg, obs, &est, residuals, inliers)) return est;
   est.lost_reason = options_.LostReason(est.inliers, ScoringInliers(obs, *inliers), est.scored);
+  // After frames the tracker did not pose (skipped, unreadable, lost), the camera may be anywhere: the first try's
+  // pose is checked as a second try's is (a pose near the old one that a little over half of the stale tracks
+  // fit loosely was taken 50-55 cm off).
+  const bool after_gap = last_tracked_index_ >= 0 && frame_index > static_cast<uint64_t>(last_tracked_index_) + 1;
+  if (est.lost_reason.empty() && after_gap && options_.retry_max_residual_ratio > 0) {
+    const double recent = TypicalResidualPx();
+    if (est.median_inlier_residual_px > FitLimitPx(recent))
+      est.lost_reason = fmt::format("{} inliers fitting to a median of {:.2f} px after {} frames without a pose, the "
+                                    "recent frames to {:.2f} px",
+                                    est.inliers, est.median_inlier_residual_px,
+                                    frame_index - static_cast<uint64_t>(last_tracked_index_) - 1, recent);
+  }
   if (!est.lost_reason.empty() && options_.retry_rot_scale > 0) {
     PoseEstimate wide = est;
     std::vector<double> wide_residuals;
@@ -236,12 +254,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
         wide_residuals = std::move(fine_residuals);
         wide_inliers = std::move(fine_inliers);
       }
-      const double threshold = options_.inlier_threshold_px;
       const double recent = TypicalResidualPx();
-      const double typical = std::max(recent, options_.retry_min_typical_fraction * threshold);
-      const double limit =
-          std::min(options_.retry_max_residual_ratio * typical, options_.retry_max_residual_fraction * threshold);
-      if (options_.retry_max_residual_ratio > 0 && wide.median_inlier_residual_px > limit) {
+      if (options_.retry_max_residual_ratio > 0 && wide.median_inlier_residual_px > FitLimitPx(recent)) {
         est.lost_reason += fmt::format(
             "; the {:g}x wider rotation spread found {} inliers fitting to a median of {:.2f} px, the recent frames "
             "to {:.2f} px: refused",
@@ -259,6 +273,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     return est;
   }
   est.tracked = true;
+  last_tracked_index_ = static_cast<int64_t>(frame_index);
   est.keyframe = est.inliers >= options_.keyframe_min_inlier_ratio * est.scored;
   if (!est.widened) {
     if (recent_median_residuals_.size() == kTypicalFrames)

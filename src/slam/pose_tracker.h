@@ -148,6 +148,9 @@ class PoseTracker {
   static constexpr size_t kTypicalFrames = 20;
   std::vector<double> recent_median_residuals_;
   double TypicalResidualPx();  // their median; 0 when none
+  // The most a checked pose's inlier median may be (retry_max_residual_ratio), given TypicalResidualPx().
+  double FitLimitPx(double recent) const;
+  int64_t last_tracked_index_ = -1;  // frame index of the last frame Track posed
   std::vector<double> scratch_;  // inlier residuals of a scoring, or the recent medians being sorted
 };
 
