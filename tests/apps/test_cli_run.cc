@@ -514,7 +514,9 @@ TEST(CliRun, AProvisionalMapThatNeverJoinsLeavesItsFramesFlaggedAsAGuessedScale)
       anchor = std::stoi(n.substr(at + std::string("provisional map from frames ").size()));
   ASSERT_GE(anchor, 0);
   for (size_t i = 0; i < index.size(); ++i)
-    if (guessed[i] == "1") EXPECT_GT(std::stoi(index[i]), anchor) << "frame " << index[i];
+    if (guessed[i] == "1") {
+      EXPECT_GT(std::stoi(index[i]), anchor) << "frame " << index[i];
+    }
 }
 
 // The bas-relief valley of a small-parallax window: held-out rotation seed 15 makes its provisional map from frames
@@ -559,32 +561,44 @@ TEST(CliRun, TheLocalBundleAdjustmentKeepsACarsScaleThroughItsBend) {
   EXPECT_GT(Field(without.output, "ate_rmse"), 5 * Field(with.output, "ate_rmse")) << without.output;
 }
 
+// Frames 120-149 of the rendered paper scene unreadable: the camera moved on meanwhile. Scene seeds 1 and 2: on
+// seed 2, with relocalisation off, the first try at frame 150 (normal spread) took a pose 50-55 cm off from 25
+// of 46 stale tracks fitting loosely, until a first try after frames without a pose was checked as the second
+// try's is (PoseTracker::FitLimitPx). Measured over scene seeds 1-6: the default run's worst tracked frame
+// 1.3 / 1.4 / 2.7 / 4.0 / 7.0 / 1.7 cm (seed 5's: a frame relocalised from 32 matches all in one part of the
+// image, 7 cm and 2 degrees off, a weakness of relocalisation left open); no frame tracked wrong in the runs
+// without relocalisation.
 TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
-  TempDir dir;
-  const auto s = RunMcslam("synth --scenario paper --seed 1 --render --frames 170 --out " + dir / "s");
-  ASSERT_EQ(s.exit_code, 0) << s.output;
-  for (int i = 120; i < 150; ++i) testing::WriteText(dir / fmt::format("s/images/{:06d}.png", i), "");
-  const GapRun with = RunOverAGap(dir / "s", dir / "r", "");
-  EXPECT_GE(Field(with.output, "tracked"), 120 + 18) << with.output;  // all before; all but 1-2 after
-  EXPECT_GE(with.tracked_after_gap, 18) << with.output;
-  // A frame tracked wrong is tens of centimetres off; the run before the gap alone has 1.1 cm at worst.
-  EXPECT_LT(with.worst_m, 0.05);
-  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
-  EXPECT_GE(report["relocalisation"]["tracked"].get<int>(), 1) << report["relocalisation"].dump();
-  EXPECT_NE(with.output.find("relocalised from"), std::string::npos) << with.output;
+  for (const int seed : {1, 2}) {
+    SCOPED_TRACE(fmt::format("scene seed {}", seed));
+    TempDir dir;
+    const auto s = RunMcslam(fmt::format("synth --scenario paper --seed {} --render --frames 170 --out {}", seed,
+                                         dir / "s"));
+    ASSERT_EQ(s.exit_code, 0) << s.output;
+    for (int i = 120; i < 150; ++i) testing::WriteText(dir / fmt::format("s/images/{:06d}.png", i), "");
+    const GapRun with = RunOverAGap(dir / "s", dir / "r", "");
+    EXPECT_GE(Field(with.output, "tracked"), 120 + 18) << with.output;  // all before; all but 1-2 after
+    EXPECT_GE(with.tracked_after_gap, 18) << with.output;
+    // A frame tracked wrong is tens of centimetres off; the runs before the gap alone have 1.1 cm at worst.
+    EXPECT_LT(with.worst_m, 0.05);
+    const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+    EXPECT_GE(report["relocalisation"]["tracked"].get<int>(), 1) << report["relocalisation"].dump();
+    EXPECT_NE(with.output.find("relocalised from"), std::string::npos) << with.output;
 
-  // Neither relocalisation nor the pose step's wider second try: nothing after the gap.
-  const GapRun without = RunOverAGap(dir / "s", dir / "n", "--no-relocalise --retry-rot-scale 0");
-  EXPECT_EQ(without.tracked_after_gap, 0) << without.output;
-  EXPECT_EQ(Field(without.output, "tracked"), 120) << without.output;
-  EXPECT_LT(without.worst_m, 0.05);
-  // The second try alone (4x the rotation spread) reaches across this gap too, and nothing it tracks is wrong:
-  // its loose fits are refused (PoseTrackerOptions::retry_max_residual_ratio; measured: frames 150 and 151, 36 and
-  // 32 inliers at medians of 1.18 and 1.02 px against the recent frames' 0.08), frame 152 is found (0.3 cm off)
-  // and 18 frames after the gap are tracked. Taken unchecked, frame 150 came out 47 cm off in one build.
-  const GapRun wider = RunOverAGap(dir / "s", dir / "w", "--no-relocalise");
-  EXPECT_GE(wider.tracked_after_gap, 10) << wider.output;
-  EXPECT_LT(wider.worst_m, 0.05);
+    // Neither relocalisation nor the pose step's wider second try: nothing after the gap (seed 2's first try is
+    // refused: its loose fit is what the check is for).
+    const GapRun without = RunOverAGap(dir / "s", dir / "n", "--no-relocalise --retry-rot-scale 0");
+    EXPECT_EQ(without.tracked_after_gap, 0) << without.output;
+    EXPECT_EQ(Field(without.output, "tracked"), 120) << without.output;
+    EXPECT_LT(without.worst_m, 0.05);
+    // The second try alone (4x the rotation spread) reaches across this gap too, and nothing it tracks is wrong:
+    // its loose fits are refused (PoseTrackerOptions::retry_max_residual_ratio; measured on seed 1: frames 150 and
+    // 151, 36 and 32 inliers at medians of 1.18 and 1.02 px against the recent frames' 0.08), then a frame is
+    // found and 18-20 frames after the gap are tracked. Taken unchecked, frame 150 came out 47 cm off in one build.
+    const GapRun wider = RunOverAGap(dir / "s", dir / "w", "--no-relocalise");
+    EXPECT_GE(wider.tracked_after_gap, 10) << wider.output;
+    EXPECT_LT(wider.worst_m, 0.05);
+  }
 }
 
 // A run reproduced from its report: --options-from takes every option of an earlier run's report.json, and the
