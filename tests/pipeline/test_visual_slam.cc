@@ -19,6 +19,7 @@
 #include "sim/paper_scenario.h"
 #include "sim/scenarios.h"
 #include "sim/render.h"
+#include "test_util.h"
 
 namespace mcslam::pipeline {
 namespace {
@@ -93,7 +94,7 @@ TEST(VisualSlam, AFrameAfterAGapOfUnreadableFramesIsRelocalisedAndTracked) {
   // scene is 3 m away), so the bounds below, about twice the worst measured, still tell the two apart.
   constexpr int kFrames = 140, kGapBegin = 100, kGapEnd = 120;
   for (uint64_t seed : {1, 2, 3, 4}) {
-    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    SCOPED_TRACE(::testing::Message() << "seed " << seed);
     const Scene scene(kFrames, seed);
     VisualSlam vs = Make(scene);
     Reports reports;
@@ -159,7 +160,7 @@ TEST(VisualSlam, AStarvingMapTakesNewPointsFromTwoViewsSoFastMotionDoesNotLoseIt
     return lost;
   };
   for (uint64_t seed : kFastSeeds) {
-    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    SCOPED_TRACE(::testing::Message() << "seed " << seed);
     const Scene scene("fast", seed);
     const int lost = lost_after_init(scene, 2);
     std::printf("[ fast     ] seed %llu: %d frames lost (two views when starving)\n",
@@ -269,7 +270,9 @@ RemapCounts RunWithCard(uint64_t seed, bool back_off,
     if (i == kMoving + 1) c.first_tried = tried;
     if (i >= kCardEnd - 12 && i < kCardEnd) c.late_tried += tried;
     if (i >= kCardEnd) c.back_remapped += st.remapped;
-    if (i == kMoving - 1) EXPECT_TRUE(vs.system().initialised());
+    if (i == kMoving - 1) {
+      EXPECT_TRUE(vs.system().initialised());
+    }
   }
   return c;
 }
@@ -284,7 +287,7 @@ RemapCounts RunWithCard(uint64_t seed, bool back_off,
 // (between the two behaviours).
 TEST(VisualSlam, RemappingBacksOffFromPointsItCannotFindAndTakesThemBackWhenTheyReappear) {
   for (uint64_t seed : {1, 2, 4}) {
-    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    SCOPED_TRACE(::testing::Message() << "seed " << seed);
     const RemapCounts with = RunWithCard(seed, true, 0), without = RunWithCard(seed, false);
     std::printf("seed %llu: tried first %d / %d, in the card's last 12 frames %d / %d, re-attached after %d / %d "
                 "(back-off / none)\n",
@@ -435,20 +438,12 @@ TEST(VisualSlamOptions, CheckNamesTheField) {
   VisualSlamOptions o;
   EXPECT_NO_THROW(o.Check());
   o.max_remap_requests = -1;
-  try {
-    o.Check();
-    FAIL();
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("max_remap_requests"), std::string::npos) << e.what();
-  }
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+  testing::ExpectThrowsWith([&] { o.Check(); }, "max_remap_requests");
   o = {};
   o.remap_retry_every = 0;
-  try {
-    o.Check();
-    FAIL();
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("remap_retry_every"), std::string::npos) << e.what();
-  }
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+  testing::ExpectThrowsWith([&] { o.Check(); }, "remap_retry_every");
   o = {};
   o.remap_tries_every_frame = -1;
   EXPECT_THROW(o.Check(), std::invalid_argument);
