@@ -3,11 +3,13 @@
 // wall, left wall), ray-cast per pixel, so the ground truth is exact.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <vector>
 
@@ -131,15 +133,44 @@ struct RenderedSequence {
   io::Trajectory groundtruth;  // world_from_cam, stamps index / 30 (the image folder's default stamps)
 };
 
+// The rendered frames are made once per build of this file, not once per test: ctest runs each test in a process
+// of its own, and the ray-casting takes ~2 s a process natively, ~20 s under the sanitizers. They are kept as
+// lossless PNGs in the build folder (MCSLAM_TEST_CACHE_DIR), in a folder named after this file's compile time
+// (an edit of the room or the renderer makes a new one); a process that renders them writes them under a
+// name of its own and renames the folder into place, so a reader never sees a partial one.
 const RenderedSequence& Sequence() {
   static const RenderedSequence seq = [] {
+    constexpr int kFrames = 40;
     RenderedSequence s;
-    const std::vector<Plane> room = MakeRoom();
-    for (int k = 0; k < 40; ++k) {
-      const Pose cam_from_world = CameraPose(k);
-      s.frames.push_back(Render(room, cam_from_world));
+    for (int k = 0; k < kFrames; ++k) {
       s.groundtruth.stamps_s.push_back(k / 30.0);
-      s.groundtruth.world_from_cam.push_back(cam_from_world.Inverse());
+      s.groundtruth.world_from_cam.push_back(CameraPose(k).Inverse());
+    }
+    const fs::path root = MCSLAM_TEST_CACHE_DIR;
+    const std::string name = "cli_images_room_" + std::to_string(std::hash<std::string>{}(__DATE__ " " __TIME__));
+    const fs::path cache = root / name;
+    auto frame_file = [](const fs::path& dir, int k) { return dir / fmt::format("{:04d}.png", k); };
+    for (int k = 0; k < kFrames; ++k) {
+      cv::Mat f = cv::imread(frame_file(cache, k).string(), cv::IMREAD_UNCHANGED);
+      if (f.empty() || f.type() != CV_8U) break;
+      s.frames.push_back(f);
+    }
+    if (static_cast<int>(s.frames.size()) == kFrames) return s;
+    s.frames.clear();
+    const std::vector<Plane> room = MakeRoom();
+    for (int k = 0; k < kFrames; ++k) s.frames.push_back(Render(room, CameraPose(k)));
+    std::error_code ec;
+    const fs::path tmp = root / fmt::format("{}.tmp{}", name, ::getpid());
+    fs::create_directories(tmp, ec);
+    bool written = !ec;
+    for (int k = 0; k < kFrames && written; ++k) written = cv::imwrite(frame_file(tmp, k).string(), s.frames[k]);
+    if (written) fs::rename(tmp, cache, ec);  // fails when another process got there first: theirs is the same
+    fs::remove_all(tmp, ec);
+    // Those of earlier builds of this file go.
+    for (const auto& e : fs::directory_iterator(root, ec)) {
+      const std::string n = e.path().filename().string();
+      if (n.starts_with("cli_images_room_") && n != name && n.find(".tmp") == std::string::npos)
+        fs::remove_all(e.path(), ec);
     }
     return s;
   }();
