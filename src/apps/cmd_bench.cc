@@ -168,7 +168,7 @@ void BenchPose(const PoseBenchArgs& a) {
   }
 }
 
-// The point-adjustment kernel (Algorithm 2) on the shape of one keyframe's adjustment: every point seen by
+// The point-adjustment kernel on the shape of one keyframe's adjustment: every point seen by
 // every keyframe of the window, the System's samples per point and window size by default. --successive:
 // the adjustments of successive keyframes instead, as a run makes them (compute::KeyframeWindowFixture): each
 // call's window one keyframe on, the current keyframe's `points` points adjusted over the keyframes that see

@@ -259,7 +259,7 @@ Pose RefineRelativePose(const Pose& cam2_from_cam1, std::span<const Eigen::Vecto
     }
   };
 
-  // Madsen, Nielsen & Tingleff (2004), Algorithm 3.16, on F = cost / 2. With the Cauchy loss the normal
+  // Madsen, Nielsen & Tingleff (2004), their algorithm 3.16, on F = cost / 2. With the Cauchy loss the normal
   // equations are the reweighted ones (IRLS); a step is still accepted only when the robust cost drops.
   const Loss loss{options.cauchy_scale * options.cauchy_scale};
   NormalEquations ne = Linearise(pose, uv_norm1, uv_norm2, options.scale, loss, for_each);

@@ -6,7 +6,7 @@
 //
 // Convention: x1 = [uv_norm1; 1], x2 = [uv_norm2; 1] are the normalised image coordinates of one scene point
 // in view 1 and view 2, and for cam2_from_cam1 = (R, t), i.e. point_in_cam2 = R point_in_cam1 + t,
-//   E = [t]x R   and   x2^T E x1 = 0                      (Hartley & Zisserman 2nd ed., §9.6, Eq. 9.12).
+//   E = [t]x R   and   x2^T E x1 = 0                      (Hartley & Zisserman 2nd ed., §9.6, (9.12)).
 #include <array>
 #include <optional>
 #include <span>
@@ -24,7 +24,7 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v);
 // E = [t]x R of a relative pose. Its Frobenius norm is sqrt(2) |t|.
 Eigen::Matrix3d EssentialFromPose(const Pose& cam2_from_cam1);
 
-// Linear essential matrix by the normalised 8-point algorithm (H&Z §11.2, Algorithm 11.1; Hartley 1997,
+// Linear essential matrix by the normalised 8-point algorithm (H&Z §11.2, their algorithm 11.1; Hartley 1997,
 // "In defense of the eight-point algorithm"): each image's points are translated to their centroid and
 // scaled to mean distance sqrt(2) from it, the 9 entries solve A e = 0 in the least-squares sense (the right
 // singular vector of the smallest singular value), the result is de-normalised, and then projected onto the
@@ -39,7 +39,7 @@ std::optional<Eigen::Matrix3d> EssentialEightPoint(std::span<const Eigen::Vector
                                                    std::span<const Eigen::Vector2d> uv_norm2,
                                                    std::span<const int> indices = {});
 
-// Sampson distance of a correspondence to the epipolar constraint (H&Z §11.4.3, Eq. 11.9): the first-order
+// Sampson distance of a correspondence to the epipolar constraint (H&Z §11.4.3, (11.9)): the first-order
 // approximation of the distance, in the 4D space of (uv_norm1, uv_norm2), to the nearest pair that satisfies
 // x2^T E x1 = 0. In normalised units (multiply by the focal length for pixels). Signed variant: the sign of
 // x2^T E x1. A correspondence at both epipoles (gradient zero) has distance 0.
@@ -89,7 +89,7 @@ struct RefineSummary {
 // of squared Sampson distances (or of their Cauchy loss) of the correspondences in `indices` (all when empty),
 // i.e. a first-order approximation of the reprojection error of the optimal triangulation (H&Z §11.4.3), with
 // the points eliminated. The damping follows
-// Madsen, Nielsen & Tingleff, "Methods for non-linear least squares problems" (2004), Algorithm 3.16
+// Madsen, Nielsen & Tingleff, "Methods for non-linear least squares problems" (2004), their algorithm 3.16
 // (gain-ratio update of mu). A step is kept only when it lowers the cost, so the result is never worse
 // (by this cost) than the start. The returned pose has |t| = 1. Throws std::invalid_argument on bad options.
 Pose RefineRelativePose(const Pose& cam2_from_cam1, std::span<const Eigen::Vector2d> uv_norm1,

@@ -68,7 +68,7 @@ std::vector<int> Indices(const std::vector<uint8_t>& mask) {
   return idx;
 }
 
-// Samples needed so that, with probability `confidence`, one of them is all inliers (H&Z Eq. 4.18).
+// Samples needed so that, with probability `confidence`, one of them is all inliers (H&Z (4.18)).
 int AdaptiveIterations(double inlier_ratio, int sample_size, double confidence, int cap) {
   const double p_good = std::pow(inlier_ratio, sample_size);
   if (p_good >= 1.0) return 1;

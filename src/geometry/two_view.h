@@ -8,7 +8,7 @@
 //   1. RANSAC (8-point): samples of 8 drawn from CounterRng(seed); each model scored by MSAC (Sampson
 //      distances truncated at ransac_threshold_px / focal_px; inliers: those below it); the number of samples
 //      adapts to the best model's inlier ratio w as N = log(1 - confidence) / log(1 - w^8) (H&Z §4.7.1,
-//      Eq. 4.18), capped at max_iterations. With refine, every sample that beats the best sample so far is
+//      (4.18)), capped at max_iterations. With refine, every sample that beats the best sample so far is
 //      locally optimised (LO-RANSAC, see step 2); the best model is finally re-fitted by the 8-point algorithm
 //      on its inliers while that lowers the score.
 //      5-point: cv::findEssentialMat (RANSAC, same threshold, confidence and max_iterations; OpenCV seeds its

@@ -98,8 +98,8 @@ int PoseTracker::ClassifyInliers(const Pose& cam_from_world, const std::vector<P
 }
 
 Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::vector<PointObservation>& obs) const {
-  // Eqs. 3-5: the translation change that moves the projections of the map the way the features moved,
-  // least squares over all scoring points (stacked Jacobians, not only the centroid), with a few
+  // Eq. 3, Eq. 4 and Eq. 5: the translation change that moves the projections of the map the way the features
+  // moved, least squares over all scoring points (stacked Jacobians, not only the centroid), with a few
   // iteratively reweighted (Huber) passes so that wrong matches do not drag it.
   Eigen::Vector3d dt = Eigen::Vector3d::Zero();
   const double huber = 3.0 * options_.inlier_threshold_px;

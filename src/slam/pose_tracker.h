@@ -1,7 +1,7 @@
 #pragma once
-// Monte Carlo pose estimation of one frame (paper §5): hypotheses drawn around the previous pose (Eq. 2),
-// the translation spread set from a linearised translation-only model (Eqs. 3-5), scored by reprojection
-// distance over the map points that were inliers before (Eq. 6, Algorithm 1); the best is the pose.
+// Monte Carlo pose estimation of one frame (paper §5): hypotheses drawn around the previous pose,
+// the translation spread set from a linearised translation-only model (LinearisedTranslation), scored by reprojection
+// distance over the map points that were inliers before (the pose kernel, compute/); the best is the pose.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -29,7 +29,7 @@ struct PoseTrackerOptions {
   // sigma_rot_motion_scale times the rotation between the last two poses this tracker estimated (0: the
   // paper's fixed Sigma_rot). A fixed spread is either too wide for a car or a tripod (fewer hypotheses near
   // the answer: KITTI 06 measured 5-29 cm over seeds at 1 degree, 5-8 cm at 0.5) or too narrow for a fast
-  // hand-held turn; the motion the tracker measured says which, as Eqs. 3-5 do for the translation.
+  // hand-held turn; the motion the tracker measured says which, as the linearised model does for the translation.
   double sigma_rot_deg = 0.5;
   double sigma_rot_motion_scale = 1.0;
   double sigma_trans_floor_m = 0.002;  // Sigma_trans never falls below this (m), so sampling never collapses
@@ -44,10 +44,10 @@ struct PoseTrackerOptions {
   // as tracking. Tracked frames of the shared real sequences and the synthetic runs have 0.73 or more.
   double min_inlier_ratio = 0.5;
   double keyframe_min_inlier_ratio = 0.6;  // keyframe when inliers >= ratio * scored points (and >= min_inliers)
-  // Where the rotation samples pivot. Eq. 2 perturbs q and t of cam_from_world, so a rotation sample turns
+  // Where the rotation samples pivot. The paper's hypotheses perturb q and t of cam_from_world, so a rotation sample turns
   // the scene about the world origin; when that origin is far from the scene (a SLAM map starts at the first
   // camera, 3 m away) each rotation sample also throws the scene sideways and only hypotheses whose
-  // translation happens to cancel it score well. kCentroid draws the same hypotheses of Eq. 2 in a world
+  // translation happens to cancel it score well. kCentroid draws the same hypotheses in a world
   // moved to the centroid of the scoring points (x' = x - m, t' = t + R m), which leaves the scene's
   // projection nearly in place under rotation samples; kOrigin is the paper's literal form.
   enum class Pivot { kCentroid, kOrigin };
@@ -117,7 +117,7 @@ class PoseTracker {
   int ClassifyInliers(const Pose& cam_from_world, const std::vector<PointObservation>& observations,
                       std::vector<double>* residuals_px, std::vector<uint8_t>* inliers) const;
 
-  // The translation the linearised translation-only model (Eqs. 3-5) predicts, from the scoring points.
+  // The translation the linearised translation-only model predicts, from the scoring points.
   Eigen::Vector3d LinearisedTranslation(const Pose& prev_cam_from_world,
                                         const std::vector<PointObservation>& observations) const;
 

@@ -128,10 +128,10 @@ struct MappingOptions {
   // the triangulation's search through the track history stay bounded on a run of any length. Never less
   // than the Fibonacci window reaches back, nor the frames since the reference while initialising/settling.
   int history_frames = 1000;
-  // Monte Carlo point adjustment (Algorithm 2).
+  // Monte Carlo point adjustment (System::AdjustPoints).
   bool adjust = true;
-  double adjust_threshold_px = 2.5;          // a point whose residual stays above this is an outlier (Algorithm 2)
-  // Points with a residual above this are re-sampled (Algorithm 2 uses adjust_threshold_px for both). Lower
+  double adjust_threshold_px = 2.5;          // a point whose residual stays above this is an outlier (the paper's threshold)
+  // Points with a residual above this are re-sampled (the paper uses adjust_threshold_px for both). Lower
   // values also refine points that are still inside the outlier threshold but biased (a depth error that
   // a short window cannot show yet); the best sample replaces such a point only when it lowers the residual.
   double candidate_threshold_px = 2.5;
@@ -263,7 +263,7 @@ struct FrameReport {
   // (and the residual statistics) replace those of that frame's report; the rest of it stands.
   bool pose_update = false;
   int scored = 0, inliers = 0;
-  // The pose step's best score (the capped reprojection distances summed, px: Eq. 6) and the translation spread it sampled
+  // The pose step's best score (the capped reprojection distances summed, px) and the translation spread it sampled
   // with (m): zero when the frame was not posed by the pose step.
   double score = 0;
   Eigen::Vector3d sigma_t = Eigen::Vector3d::Zero();
@@ -272,7 +272,7 @@ struct FrameReport {
   double reproj_mean_px = 0;    // mean residual of the inlier observations of map points in this frame
   double reproj_median_px = 0;  // median residual of all observations of map points in this frame
   double track_ms = 0, map_ms = 0, adjust_ms = 0, init_ms = 0;
-  // adjust_ms's two parts on a keyframe: the Monte Carlo point adjustment (Algorithm 2) and the local bundle
+  // adjust_ms's two parts on a keyframe: the Monte Carlo point adjustment and the local bundle
   // adjustment after it (MappingOptions::local_ba_keyframes; with local_ba_async its preparation, solve and
   // application, and local_ba_wait_ms what the next frame's Process waited for the solve to end).
   double adjust_points_ms = 0, local_ba_ms = 0, local_ba_wait_ms = 0;

@@ -1,5 +1,6 @@
 // The System's mapping (paper §6.2-6.3): new points by triangulation, Monte Carlo point adjustment over
-// Fibonacci-spaced keyframes (Algorithm 2, Eqs. 7-10), local bundle adjustment (the baseline), the frame history.
+// Fibonacci-spaced keyframes (Algorithm 2; Eq. 7 and Eq. 10 in the point kernel, Eq. 8 and Eq. 9 below), local
+// bundle adjustment (the baseline), the frame history.
 #include "slam/system.h"
 
 #include <algorithm>
@@ -290,7 +291,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   }
   if (window.size() < 2) return;
 
-  // The residual of a point (Algorithm 2) is read robustly: the median of its reprojection distances over
+  // The residual of a point is read robustly: the median of its reprojection distances over
   // the window's keyframes, so that one wrong match (a feature on the wrong spot in one frame) neither makes
   // a good point a candidate nor condemns it.
   auto median_residual = [&](const std::vector<std::pair<int, Eigen::Vector2d>>& views, const Eigen::Vector3d& X) {
@@ -320,7 +321,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
     if (views.size() < 3) continue;
     const double before = median_residual(views, p->position_in_world);
     if (before <= mo.candidate_threshold_px) continue;
-    // Eqs. 8-9: the point displacement dz that the linearised projection model says would move its
+    // Eq. 8 and Eq. 9: the point displacement dz that the linearised projection model says would move its
     // projections onto the features, stacked over the window's views (Huber-weighted, so that a wrong
     // match does not drive it): unlike one view, several see the point's depth error too. The spread is
     // |dz| per axis plus a floor.

@@ -49,7 +49,8 @@ using cpu::VecF;
 constexpr int kChunk = 256;  // hypotheses per task; a multiple of kLanes
 static_assert(kChunk % kLanes == 0);
 
-// Scores hypotheses [h0, h0 + n) into out[0 .. n). The table's columns are padded to 16 floats, so the
+// Algorithm 1 and its score, Eq. 6: each hypothesis' capped reprojection distances summed over the scoring
+// points. Scores hypotheses [h0, h0 + n) into out[0 .. n). The table's columns are padded to 16 floats, so the
 // last block may read past `count` into zeros; only n scores are written.
 void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseScoringParams& k,
                 const NormalTable& normals, int h0, int n, float* __restrict out) {

@@ -64,7 +64,7 @@ __global__ void __launch_bounds__(kPoseBlock)
   const ScaledPose p = MakeScaledPoseT<float>(q, t, k.fx, k.fy);
   const float cap = k.max_distance_px;
 
-  // The residual loop of Algorithm 1, points in order 0 .. num_points-1 as on the CPU (same float sum).
+  // The residual loop of Algorithm 1 (the score, Eq. 6), points in order 0 .. num_points-1 as on the CPU (same float sum).
   float acc = 0.0f;
   __shared__ float tile[5][kTilePoints];
   const size_t n_all = static_cast<size_t>(num_points);
