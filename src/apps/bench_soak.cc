@@ -37,6 +37,7 @@ struct SoakArgs {
   int window = 1000;
   uint64_t seed = 1;
   bool observations = false;
+  bool merge_revisited_points = slam::MappingOptions{}.merge_revisited_points;
   std::string backend = "cpu";
   std::string csv;
 };
@@ -71,6 +72,7 @@ void BenchSoak(const SoakArgs& a) {
   std::unique_ptr<slam::System> system;
   slam::SystemOptions sys_opts;
   sys_opts.seed = a.seed;
+  sys_opts.mapping.merge_revisited_points = a.merge_revisited_points;
   if (a.observations) {
     system = std::make_unique<slam::System>(seq.camera, sys_opts, MakePoseKernelFor(a.backend),
                                             MakePointKernelFor(a.backend));
@@ -187,6 +189,9 @@ void RegisterBenchSoak(CLI::App* bench) {
                  "The scenario's feature observations to the back end alone, instead of rendered images through the "
                  "front end");
   soak->add_option("--csv", a->csv, "Also write the windows to this CSV file");
+  soak->add_option("--merge-revisited-points", a->merge_revisited_points,
+                   "A new track at a mapped place goes on as the map point there (run's option of the same name)")
+      ->capture_default_str();
   AddBackendFlag(soak, &a->backend);
   soak->callback([a] { BenchSoak(*a); });
 }

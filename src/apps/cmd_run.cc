@@ -449,6 +449,11 @@ void RegisterRun(CLI::App& app) {
                   "its features tracked; applied before that frame's pose step (false: in place, the next frame "
                   "waits; the same poses on a folder of observations)")
       ->capture_default_str();
+  cmd->add_option("--merge-revisited-points", args->system.mapping.merge_revisited_points,
+                  "A new track whose point is where a map point not seen in the frame projects, in every view it is "
+                  "triangulated from, goes on as that point (false: it makes a new point; off by default until the two runs "
+                  "it worsens are understood, docs/tuning.md)")
+      ->capture_default_str();
   cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
                   "Smallest parallax for a new point (largest angle between its viewing rays)")
       ->check(NonNegative())

@@ -239,6 +239,13 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   const auto t_backend = Clock::now();
   step.reports = system_.Process(obs);
   step.backend_ms = MsSince(t_backend);
+  // Tracks the System took as older map points (a place seen again): they go on under the points' ids, with
+  // their own descriptors (this view's).
+  for (const auto& [track, point] : system_.merged_tracks())
+    if (frontend_.Relabel(track, point)) {  // else the System goes on renaming the track's features
+      lost_descriptors_.erase(point);
+      remap_tries_.erase(point);
+    }
   KeepFirstLooks(obs);
   if (const slam::FrameReport* current = step.current()) {
     if (current->has_pose) latest_cam_from_world_ = current->cam_from_world, latest_inliers_ = current->inliers;

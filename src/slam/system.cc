@@ -225,15 +225,26 @@ void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> k
 }
 
 std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
+  merged_tracks_.clear();
   FrameRecord rec;
   rec.index = frame.index;
   rec.stamp_s = frame.stamp_s;
   rec.features.reserve(frame.features.size());
+  size_t aliased = 0;
   for (const FeatureObservation& f : frame.features) {
     if (!f.uv_px.allFinite()) continue;
     const Eigen::Vector2d uv = camera_.UndistortPixel(f.uv_px);
-    if (uv.allFinite()) rec.features.push_back({f.feature_id, uv});
+    if (!uv.allFinite()) continue;
+    int64_t id = f.feature_id;
+    if (!track_alias_.empty())
+      if (auto it = track_alias_.find(id); it != track_alias_.end()) id = it->second, ++aliased;
+    rec.features.push_back({id, uv});
   }
+  if (aliased < track_alias_.size())  // the tracks that ended: their ids never come again
+    std::erase_if(track_alias_, [&](const auto& kv) {
+      return std::none_of(frame.features.begin(), frame.features.end(),
+                          [&](const FeatureObservation& f) { return f.feature_id == kv.first; });
+    });
   std::sort(rec.features.begin(), rec.features.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
   rec.features.erase(std::unique(rec.features.begin(), rec.features.end(),
                                  [](const auto& a, const auto& b) { return a.id == b.id; }),

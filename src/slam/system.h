@@ -10,6 +10,7 @@
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include "compute/point_kernel.h"
@@ -124,6 +125,16 @@ struct MappingOptions {
   // A point removed as an outlier may be triangulated again from its track this many frames later (its
   // first triangulation is often what was wrong: low parallax early in the track).
   int retriangulate_after_frames = 10;
+  // A place seen again: a new track whose point, triangulated, is where one map point not seen in this frame
+  // projects (within adjust_threshold_px in every view it is triangulated from, not seen beside the track, and no
+  // other such point) goes on
+  // as that map point instead of making a second one (System::MergeTrack;
+  // the front end is told through System::merged_tracks). Without it, every return to a mapped place whose
+  // lost points the remapping does not find adds the place's points again (a 10,000-frame orbit: 354 map points
+  // after 1,000 frames, 1,671 at the end). Off by default until two end-to-end runs it changes are understood: the
+  // rendered rotation scenario, seed 15 (a provisional map after a pan), went from 2.2 to 4.1 cm, and after
+  // CliRun's 30-frame gap the pose step's second try alone no longer reached across (0 frames tracked after it).
+  bool merge_revisited_points = false;
   // Frames whose features are kept (their poses are always kept): older ones drop theirs, so that memory and
   // the triangulation's search through the track history stay bounded on a run of any length. Never less
   // than the Fibonacci window reaches back, nor the frames since the reference while initialising/settling.
@@ -364,6 +375,10 @@ class System {
   // (the rest of the map is at another scale).
   bool AtCurrentScale(int64_t point_id) const { return !bridging() || Provisional(point_id); }
   const Map& map() const { return map_; }
+  // The tracks that went on as an older map point in the last Process (MappingOptions::merge_revisited_points):
+  // (track id, map point id) pairs. The System already takes the track's features under the point's id; a
+  // front end should relabel the track (the System otherwise renames its features frame by frame).
+  const std::vector<std::pair<int64_t, int64_t>>& merged_tracks() const { return merged_tracks_; }
   // The camera the map is made with: the given one, or with its k1 self-calibrated (InitOptions::self_calibrate).
   const PinholeCamera& camera() const { return camera_; }
   const SelfCalibration& self_calibration() const { return self_calibration_; }
@@ -470,6 +485,14 @@ class System {
   // any keyframe has measured one.
   std::optional<double> RecentNoisePx() const;
   int TriangulateNewPoints(int slot, int inliers);
+  // MappingOptions::merge_revisited_points: the map point not observed in `slot` that the new track `f`
+  // triangulated from `views` is, if any; `unseen` holds those points and their projections into `slot`.
+  // `seen`: the keyframes the track is seen in (a point seen there too is another point).
+  std::optional<int64_t> RevisitedPoint(const FeatureUndistorted& f, const std::vector<int>& views,
+                                        const std::vector<int>& seen,
+                                        const std::vector<std::pair<int64_t, Eigen::Vector2d>>& unseen) const;
+  // The track's features in every frame go under the point's id (dropped where that frame has the point too).
+  void MergeTrack(int64_t track, int64_t point);
   void AdjustPoints(int slot, FrameReport* r);
   void BundleAdjustWindow(int slot, FrameReport* r);
   // MappingOptions::local_ba_keyframes: the newest keyframes' poses and their points by one bundle
@@ -534,6 +557,10 @@ class System {
   std::unordered_set<int64_t> loaded_points_;
   // MappingOptions::local_ba_async: the adjustment being solved, and the report of its keyframe.
   std::unique_ptr<LocalBa> pending_ba_;
+  // Tracks merged into a map point (MergeTrack): their features are taken under the point's id until a frame comes
+  // without them (a front end never reuses an id); and those merged in the last Process.
+  std::unordered_map<int64_t, int64_t> track_alias_;
+  std::vector<std::pair<int64_t, int64_t>> merged_tracks_;
   std::vector<FrameReport> held_reports_;  // revised, not yet returned (ApplyPendingAdjustment, a Process that threw)
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last pure-rotation frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.

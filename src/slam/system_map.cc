@@ -61,6 +61,18 @@ int System::TriangulateNewPoints(int slot, int inliers) {
   const bool starving = inliers < mo.starving_inliers;
   to.min_parallax_deg = starving ? std::min(wanted, mo.starving_parallax_deg) : wanted;
   const int min_views = starving ? std::min(mo.min_track_frames, mo.starving_min_track_frames) : mo.min_track_frames;
+  // The map points this frame does not observe, where they project into it (merge_revisited_points). Not on a
+  // provisional map: the rest of the map is at another scale.
+  std::vector<std::pair<int64_t, Eigen::Vector2d>> unseen;
+  if (mo.merge_revisited_points && !bridging())
+    for (const MapPoint& p : map_.points()) {
+      Eigen::Vector2d uv;
+      if (p.state != PointState::kRemoved && !cur.Find(p.id) &&
+          ideal_.ProjectWorld(cur.cam_from_world, p.position_in_world, &uv) &&
+          ideal_.InImage(uv, -mo.max_reprojection_px))
+        unseen.emplace_back(p.id, uv);
+    }
+  std::vector<std::pair<int64_t, int64_t>> merges;  // track, map point
   int added = 0;
   for (const FeatureUndistorted& f : cur.features) {
     MapPoint* existing = map_.Find(f.id);
@@ -107,6 +119,12 @@ int System::TriangulateNewPoints(int slot, int inliers) {
     }
     const geometry::Triangulation t = geometry::TriangulateDlt(poses, uv, to);
     if (!t.ok) continue;
+    if (!existing && !unseen.empty())
+      if (const std::optional<int64_t> old = RevisitedPoint(f, best_views, seen, unseen);
+          old && std::none_of(merges.begin(), merges.end(), [&](const auto& m) { return m.second == *old; })) {
+        merges.emplace_back(f.id, *old);
+        continue;
+      }
     MapPoint p;
     p.id = f.id;
     p.position_in_world = t.point_in_world;
@@ -118,7 +136,57 @@ int System::TriangulateNewPoints(int slot, int inliers) {
     if (bridging()) bridge_->points.insert(p.id);
     ++added;
   }
+  for (const auto& [track, point] : merges) MergeTrack(track, point);
   return added;
+}
+
+std::optional<int64_t> System::RevisitedPoint(const FeatureUndistorted& f, const std::vector<int>& views,
+                                              const std::vector<int>& seen,
+                                              const std::vector<std::pair<int64_t, Eigen::Vector2d>>& unseen) const {
+  // An inlier of the point adjustment in every view (Algorithm 2's outlier threshold), and the only one: the
+  // views' depth barely constrains (right merges measured up to 11 % of the depth off the track's own
+  // triangulation), so two map points that both fit are told apart by nothing here. A point observed in a
+  // keyframe beside the track is another point (two tracks at once), whatever it projects to.
+  const double r = std::min(options_.mapping.max_reprojection_px, options_.mapping.adjust_threshold_px);
+  std::optional<int64_t> found;
+  for (const auto& [id, uv] : unseen) {
+    if ((uv - f.uv_px).norm() > r) continue;
+    if (std::any_of(seen.begin(), seen.end(), [&, id = id](int k) { return map_.frames[k].Find(id) != nullptr; }))
+      continue;
+    const MapPoint& p = *map_.Find(id);
+    bool agrees = true;
+    for (int k : views) {
+      Eigen::Vector2d uv_k;
+      agrees = ideal_.ProjectWorld(map_.frames[k].cam_from_world, p.position_in_world, &uv_k) &&
+               (uv_k - map_.frames[k].Find(f.id)->uv_px).norm() <= r;
+      if (!agrees) break;
+    }
+    if (!agrees) continue;
+    if (found) return std::nullopt;
+    found = id;
+  }
+  return found;
+}
+
+void System::MergeTrack(int64_t track, int64_t point) {
+  for (size_t i = static_cast<size_t>(pruned_until_); i < map_.frames.size(); ++i) {  // older ones have no features
+    FrameRecord& fr = map_.frames[i];
+    auto at = std::lower_bound(fr.features.begin(), fr.features.end(), track,
+                               [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
+    if (at == fr.features.end() || at->id != track) continue;
+    const Eigen::Vector2d uv = at->uv_px;
+    fr.features.erase(at);
+    if (fr.Find(point)) continue;
+    auto to = std::lower_bound(fr.features.begin(), fr.features.end(), point,
+                               [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
+    fr.features.insert(to, {point, uv});
+  }
+  MapPoint& p = *map_.Find(point);
+  p.state = PointState::kActive;
+  p.inlier = true;
+  p.last_seen_frame = map_.frames.back().index;
+  track_alias_[track] = point;
+  merged_tracks_.emplace_back(track, point);
 }
 
 void System::PruneHistory(int slot) {
