@@ -42,9 +42,13 @@ struct FrameRecord {
   int pose_inliers = 0;  // the map points that agreed with the pose step's pose (0: posed otherwise)
 
   const FeatureUndistorted* Find(int64_t id) const {
-    auto it = std::lower_bound(features.begin(), features.end(), id,
-                               [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
+    auto it = LowerBound(id);
     return it != features.end() && it->id == id ? &*it : nullptr;
+  }
+  // Where `id` is or would go in `features` (sorted by id).
+  std::vector<FeatureUndistorted>::const_iterator LowerBound(int64_t id) const {
+    return std::lower_bound(features.begin(), features.end(), id,
+                            [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
   }
 };
 

@@ -171,15 +171,12 @@ std::optional<int64_t> System::RevisitedPoint(const FeatureUndistorted& f, const
 void System::MergeTrack(int64_t track, int64_t point) {
   for (size_t i = static_cast<size_t>(pruned_until_); i < map_.frames.size(); ++i) {  // older ones have no features
     FrameRecord& fr = map_.frames[i];
-    auto at = std::lower_bound(fr.features.begin(), fr.features.end(), track,
-                               [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
+    auto at = fr.LowerBound(track);
     if (at == fr.features.end() || at->id != track) continue;
     const Eigen::Vector2d uv = at->uv_px;
     fr.features.erase(at);
     if (fr.Find(point)) continue;
-    auto to = std::lower_bound(fr.features.begin(), fr.features.end(), point,
-                               [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
-    fr.features.insert(to, {point, uv});
+    fr.features.insert(fr.LowerBound(point), {point, uv});
   }
   MapPoint& p = *map_.Find(point);
   p.state = PointState::kActive;
