@@ -1,7 +1,8 @@
 #pragma once
-// Monte Carlo pose estimation of one frame (paper §5): hypotheses drawn around the previous pose,
-// the translation spread set from a linearised translation-only model (LinearisedTranslation), scored by reprojection
-// distance over the map points that were inliers before (the pose kernel, compute/); the best is the pose.
+// Monte Carlo pose estimation of one frame (paper §5): hypotheses drawn around the previous pose, the
+// translation spread set from a linearised translation-only model (LinearisedTranslation), scored by
+// reprojection distance over the map points that were inliers before (the pose kernel, compute/); the best is
+// the pose.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -44,9 +45,9 @@ struct PoseTrackerOptions {
   // as tracking. Tracked frames of the shared real sequences and the synthetic runs have 0.73 or more.
   double min_inlier_ratio = 0.5;
   double keyframe_min_inlier_ratio = 0.6;  // keyframe when inliers >= ratio * scored points (and >= min_inliers)
-  // Where the rotation samples pivot. The paper's hypotheses perturb q and t of cam_from_world, so a rotation sample turns
-  // the scene about the world origin; when that origin is far from the scene (a SLAM map starts at the first
-  // camera, 3 m away) each rotation sample also throws the scene sideways and only hypotheses whose
+  // Where the rotation samples pivot. The paper's hypotheses perturb q and t of cam_from_world, so a rotation
+  // sample turns the scene about the world origin; when that origin is far from the scene (a SLAM map starts at
+  // the first camera, 3 m away) each rotation sample also throws the scene sideways and only hypotheses whose
   // translation happens to cancel it score well. kCentroid draws the same hypotheses in a world
   // moved to the centroid of the scoring points (x' = x - m, t' = t + R m), which leaves the scene's
   // projection nearly in place under rotation samples; kOrigin is the paper's literal form.

@@ -126,10 +126,9 @@ struct MappingOptions {
   // first triangulation is often what was wrong: low parallax early in the track).
   int retriangulate_after_frames = 10;
   // A place seen again: a new track whose point, triangulated, is where one map point not seen in this frame
-  // projects (within adjust_threshold_px in every view it is triangulated from, not seen beside the track, and no
-  // other such point) goes on
-  // as that map point instead of making a second one (System::MergeTrack;
-  // the front end is told through System::merged_tracks). Without it, every return to a mapped place whose
+  // projects (within min(max_reprojection_px, adjust_threshold_px) in every view it is triangulated from, not seen
+  // beside the track, and no other such point) goes on as that map point instead of making a second one
+  // (System::RevisitedPoint, MergeTrack; the front end is told through System::merged_tracks). Without it, every return to a mapped place whose
   // lost points the remapping does not find adds the place's points again (a 10,000-frame orbit: 354 map points
   // after 1,000 frames, 1,671 at the end). Off by default until two end-to-end runs it changes are understood: the
   // rendered rotation scenario, seed 15 (a provisional map after a pan), went from 2.2 to 4.1 cm, and after
