@@ -135,6 +135,9 @@ struct RemapRequest {
   // occlusion); otherwise it costs nothing and counts as deferred. A new track would take that corner, and a
   // corner taken by a track is never a remapping candidate.
   bool only_near_new_corner = false;
+  // Its look when its track began, if the caller kept it: a place seen again from where the point was first seen
+  // looks like that (a second run in a loaded map above all); the nearer of the two looks' matches is taken.
+  std::optional<Descriptor> first_look = std::nullopt;
 };
 
 struct TrackedFeature {

@@ -196,7 +196,12 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
         const std::optional<Descriptor>& d = descriptors.at(k);
         looks.push_back(d ? &*d : nullptr);
       }
-      if (const auto m = MatchDescriptor(requests[r]->descriptor, looks, o)) {
+      std::optional<DescriptorMatch> m = MatchDescriptor(requests[r]->descriptor, looks, o);
+      if (requests[r]->first_look)
+        if (const auto m_first = MatchDescriptor(*requests[r]->first_look, looks, o);
+            m_first && (!m || m_first->distance < m->distance))
+          m = m_first;
+      if (m) {
         matches.push_back({m->distance, r, window_candidates[r][m->index]});
       } else {
         ++st.remap_no_match;

@@ -184,7 +184,9 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() {
     const bool late = tries.failures >= options_.remap_tries_every_frame;
     const bool deferred = late && back_off && (now + p->id) % options_.remap_retry_every != 0;
     if (late && !deferred) late_requested_.insert(p->id);
-    requests.push_back({p->id, lost_descriptors_.at(p->id), uv, deferred});
+    const auto first = first_descriptors_.find(p->id);
+    requests.push_back({p->id, lost_descriptors_.at(p->id), uv, deferred,
+                        first != first_descriptors_.end() ? std::optional(first->second) : std::nullopt});
   }
   // Only the points in view now keep their count (the map's size stays that of the view).
   std::erase_if(remap_tries_, [&](const auto& kv) { return kv.second.in_view_at != now; });

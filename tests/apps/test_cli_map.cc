@@ -85,11 +85,12 @@ TEST(CliMap, ASecondRunLocalisesInTheFirstRunsMapFromItsFirstFrame) {
   ExpectLocalisedInTheFirstMap(t, 300, 0.02);
 }
 
-// 7-Scenes, seeds 1-4: relocalised at frame 0 (60-61 of 86 matches on seeds 2-4), 300/300; unaligned, 8.6,
-// 10.7, 18.5 and 42.9 mm from the first run's poses against its own ATE of 75, 74, 71 and 67 mm (0.11-0.64x;
-// the bound is 2x). The second run extends the map with points of its own where it does not re-attach
-// the first run's, and its Sim(3) scale ends 0.98-1.8 % (seeds 1-3) and 5.6 % (seed 4) from the first's: no
-// scale bound here beyond what the unaligned error already holds.
+// 7-Scenes, seeds 1-6 (AVX-512 machine, 2026-11-28): relocalised at frame 0, 300/300; unaligned, 9.8-39.2 mm
+// from the first run's poses against its own ATE of 37.7-40.4 mm (0.24-1.00x; the bound is 2x), the
+// second run's Sim(3) scale within 2.6 % of the first's. Before remapping also matched a point's first look
+// (RemapRequest::first_look) the second run re-found fewer of the first run's points, doubled the map, and
+// drifted in scale by up to 4.7 %: 0.26-2.38x, seed 1 over the bound. No scale bound here beyond what the
+// unaligned error already holds.
 TEST(CliMapReal, SevenScenesLocalisesInItsOwnMap) {
   REAL_SEQUENCE_OR_SKIP(seq, "7scenes_redkitchen_frames000-299");
   TempDir dir;

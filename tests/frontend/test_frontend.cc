@@ -550,6 +550,26 @@ TEST(Frontend, RemapRefusesAWrongDescriptor) {
   EXPECT_EQ(r3.stats.remap_no_match, 1);
 }
 
+// A point whose last look no longer matches (here: another feature's) is still re-attached by the look it had
+// when its track began, when the caller gives that too (RemapRequest::first_look); with neither matching, none.
+TEST(Frontend, RemapMatchesTheFirstLookWhereTheLastOneFails) {
+  for (const bool right_first_look : {true, false}) {
+    RemapScene scene;
+    Frontend fe;
+    ASSERT_NO_FATAL_FAILURE(scene.Run(fe));
+    RemapRequest req{scene.a_id, scene.b_desc, scene.a_at_frame3};
+    req.first_look = right_first_look ? scene.a_desc : scene.b_desc;
+    const FrameResult r3 = fe.Process(scene.Frame3(), 3, 0.3, std::span<const RemapRequest>(&req, 1));
+    if (right_first_look) {
+      ASSERT_EQ(r3.remapped_ids, std::vector<int64_t>{scene.a_id});
+      EXPECT_LT((Find(r3, scene.a_id)->uv_px - scene.a_at_frame3).norm(), 1.5);  // as in the test above
+    } else {
+      EXPECT_TRUE(r3.remapped_ids.empty());
+      EXPECT_EQ(r3.stats.remap_no_match, 1);
+    }
+  }
+}
+
 TEST(Frontend, RemapRefusesOutsideTheWindowTheImageOrForALiveId) {
   RemapScene scene;
   Frontend fe;
