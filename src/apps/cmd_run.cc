@@ -55,6 +55,8 @@ struct RunArgs {
   // front end and the pixel outputs (no effect on a folder of observations). Given where they do nothing, they
   // are an error naming them, not silently ignored.
   std::vector<const CLI::Option*> mapping_flags, image_flags;
+  // And those of the known map only: where the run builds its map, the System sets them from the map it built.
+  std::vector<const CLI::Option*> known_map_flags;
 };
 
 // The options added to cmd after its first `from` ones (CLI11 keeps them in the order they were added).
@@ -272,6 +274,11 @@ void Run(const RunArgs& a) {
     spdlog::info("options from {} (flags given here on top)", a.options_from);
   }
   const nlohmann::json* rep = report ? &*report : nullptr;
+  if (!a.known_map)
+    RefuseFlagsWithoutEffect(a.known_map_flags,
+                             "where the run builds its map (the pose step's translation floor is set from the map's "
+                             "depth when it is made: SystemOptions::sigma_trans_floor_rel_depth); it acts with "
+                             "--known-map only");
   if (!a.known_map && IsImageInput(a.input, a.image)) {
     RunImageJob(a.input, a.out, SystemOptionsFor(a, rep), a.backend, ImageOptionsFor(a, rep));
     return;
@@ -472,6 +479,7 @@ void RegisterRun(CLI::App& app) {
       ->check(Between(1e-6, 1.0))
       ->capture_default_str();
   args->pose.Add(cmd);
+  args->known_map_flags = {cmd->get_option("--sigma-trans-floor")};
   AddBackendFlag(cmd, &args->backend);
   cmd->add_option("--options-from", args->options_from,
                   "Take every option from an earlier run's report.json (its System's and front end's); flags given "

@@ -136,7 +136,8 @@ TEST(CliRun, BadInputIsAClearError) {
 
 // A flag that does nothing in the mode the input selects is an error naming it (issue #20: on a folder of
 // observations --overlay, --plot, --camera, --start/--end, --gt (even a missing file) and --format were
-// ignored without a word; with --known-map so were the map-building flags). Nothing is run or written.
+// ignored without a word; with --known-map so were the map-building flags; and --sigma-trans-floor where the run
+// builds its map, whose floor the System sets from the map's depth). Nothing is run or written.
 TEST(CliRun, FlagsWithoutEffectInTheModeAreRefusedNamingThem) {
   TempDir dir;
   ASSERT_EQ(RunMcslam("synth --scenario paper --frames 5 --out " + dir / "s").exit_code, 0);
@@ -152,6 +153,8 @@ TEST(CliRun, FlagsWithoutEffectInTheModeAreRefusedNamingThem) {
            {"--known-map --end 3", "--end", "on a folder of observations"},
            {"--known-map --window 5", "--window", "with --known-map"},
            {"--known-map --init-method 5point", "--init-method", "with --known-map"},
+           {"--sigma-trans-floor 0.01", "--sigma-trans-floor", "where the run builds its map"},
+           {"--dataset synthetic --sigma-trans-floor 0.01", "--sigma-trans-floor", "where the run builds its map"},
        }) {
     const auto r = RunMcslam("run " + dir / "s " + flags + " --out " + dir / "r");
     EXPECT_EQ(r.exit_code, 1) << flags << "\n" << r.output;
@@ -159,7 +162,9 @@ TEST(CliRun, FlagsWithoutEffectInTheModeAreRefusedNamingThem) {
     EXPECT_FALSE(std::filesystem::exists(dir / "r")) << flags;
   }
   // The flags of each mode still work in it.
-  EXPECT_EQ(RunMcslam("run " + dir / "s --known-map --smooth-alpha 0.3 --hypotheses 1024 --out " + dir / "k").exit_code, 0);
+  const auto known = RunMcslam("run " + dir / "s --known-map --smooth-alpha 0.3 --hypotheses 1024 " +
+                               "--sigma-trans-floor 0.01 --out " + dir / "k");
+  EXPECT_EQ(known.exit_code, 0) << known.output;
 }
 
 // SIGTERM (what `timeout`, `kill` and job schedulers send) stops a run like Ctrl-C: what was done is written,
