@@ -17,7 +17,7 @@ double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 }
 
 // Inlier flags and their count for a rotation; the sum of squared inlier angles in `sq_sum`.
-int Score(const Eigen::Matrix3d& r, std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam,
+int ScoreRotation(const Eigen::Matrix3d& r, std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam,
           double threshold_rad, std::vector<uint8_t>* inlier, double* sq_sum) {
   int n = 0;
   *sq_sum = 0;
@@ -68,7 +68,7 @@ RotationOnlyResult EstimateRotationOnly(std::span<const Eigen::Vector3d> ref, st
     const Eigen::Vector3d r2[2] = {ref[i], ref[j]}, c2[2] = {cam[i], cam[j]};
     const Eigen::Matrix3d r = RotationFromBearings(r2, c2);
     double sq = 0;
-    const int count = Score(r, ref.first(n), cam.first(n), threshold_rad, &flags, &sq);
+    const int count = ScoreRotation(r, ref.first(n), cam.first(n), threshold_rad, &flags, &sq);
     if (count > best || (count == best && sq < best_sq)) {
       best = count;
       best_sq = sq;
@@ -88,7 +88,7 @@ RotationOnlyResult EstimateRotationOnly(std::span<const Eigen::Vector3d> ref, st
   // Least squares on the inliers, then the inliers of that, until they stop changing (3 rounds at most).
   Eigen::Matrix3d r = best_r;
   double sq = 0;
-  int count = Score(r, ref.first(n), cam.first(n), threshold_rad, &flags, &sq);
+  int count = ScoreRotation(r, ref.first(n), cam.first(n), threshold_rad, &flags, &sq);
   for (int round = 0; round < 3; ++round) {
     std::vector<Eigen::Vector3d> a, b;
     for (int k = 0; k < n; ++k)
@@ -96,7 +96,7 @@ RotationOnlyResult EstimateRotationOnly(std::span<const Eigen::Vector3d> ref, st
     const Eigen::Matrix3d refit = RotationFromBearings(a, b);
     std::vector<uint8_t> refit_flags;
     double refit_sq = 0;
-    const int refit_count = Score(refit, ref.first(n), cam.first(n), threshold_rad, &refit_flags, &refit_sq);
+    const int refit_count = ScoreRotation(refit, ref.first(n), cam.first(n), threshold_rad, &refit_flags, &refit_sq);
     if (refit_count < count || (refit_count == count && refit_sq >= sq)) break;
     r = refit, flags = std::move(refit_flags), count = refit_count, sq = refit_sq;
   }

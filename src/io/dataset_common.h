@@ -37,11 +37,6 @@ inline bool IsDir(const fs::path& p) {
   return fs::is_directory(p, ec);
 }
 
-inline std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
-
 inline bool HasImageFile(const fs::path& dir) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))

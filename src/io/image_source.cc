@@ -17,11 +17,6 @@ namespace mcslam::io {
 namespace fs = std::filesystem;
 namespace {
 
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
-
 // "frame2" < "frame10": digit runs compare by value (then by length, so "01" and "1" stay distinct).
 bool NaturalLess(const std::string& a, const std::string& b) {
   size_t i = 0, j = 0;
@@ -82,7 +77,7 @@ cv::Mat ReadImage(const std::string& path, std::string* error) {
 }  // namespace
 
 bool IsImageFileName(const std::string& name) {
-  const std::string ext = Lower(fs::path(name).extension().string());
+  const std::string ext = detail::Lower(fs::path(name).extension().string());
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".pgm" || ext == ".ppm" || ext == ".bmp";
 }
 

@@ -1,6 +1,7 @@
 #pragma once
 // Internal to the io layer: reading text files line by line with line numbers, strict number parsing,
 // and errors of the form "<path>:<line>: <what>". Not part of the public io API.
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -62,6 +63,12 @@ class LineReader {
   std::ifstream in_;
   int line_ = 0;
 };
+
+// ASCII lower case (file extensions, dataset and format names).
+inline std::string Lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
 
 inline bool IsSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 

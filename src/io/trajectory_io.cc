@@ -14,14 +14,10 @@ namespace mcslam::io {
 namespace {
 
 using detail::LineReader;
+using detail::Lower;
 
 // Below this length a quaternion read from a file carries no direction: the file is wrong.
 constexpr double kMinQuaternionNorm = 1e-9;
-
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
 
 bool HasCsvExtension(const std::string& path) {
   return Lower(std::filesystem::path(path).extension().string()) == ".csv";

@@ -11,16 +11,12 @@
 #include "core/random.h"
 
 namespace mcslam::sim {
+
+std::string detail::Num(double v) { return fmt::format("{}", v); }
+
 namespace {
 
-// One Philox stream per purpose, so that e.g. changing the outlier fraction leaves the noise unchanged.
-constexpr uint32_t kStreamPoints = 1;
-constexpr uint32_t kStreamPath = 2;
-constexpr uint32_t kStreamNoise = 3;
-constexpr uint32_t kStreamOutlierPick = 4;
-constexpr uint32_t kStreamOutlierPixel = 5;
-
-std::string Num(double v) { return fmt::format("{}", v); }
+using namespace detail;  // the seed's streams, Num
 
 // A sinusoid of the camera path: amplitude * sin(2 pi t / period + phase), phase drawn from the seed.
 struct Wave {

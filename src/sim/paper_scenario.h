@@ -161,4 +161,20 @@ SequenceSummary Summarize(const SyntheticSequence& sequence);
 // that could not be created or written.
 void WriteSyntheticSequence(const SyntheticSequence& sequence, const std::string& dir);
 
+namespace detail {
+// One Philox stream of the seed per purpose, so that e.g. changing the outlier fraction leaves the noise unchanged.
+// The paper's scenario draws 1-5; every scenario draws its points from 1 and its noise and outliers from 3-5
+// (ObservePoints), the other scenarios their paths and worlds from 6 and 7.
+constexpr uint32_t kStreamPoints = 1;
+constexpr uint32_t kStreamPath = 2;
+constexpr uint32_t kStreamNoise = 3;
+constexpr uint32_t kStreamOutlierPick = 4;
+constexpr uint32_t kStreamOutlierPixel = 5;
+constexpr uint32_t kStreamScenarioPath = 6;
+constexpr uint32_t kStreamWorld = 7;
+
+// A number as the option checks' messages write it (the shortest text that reads back the same).
+std::string Num(double v);
+}  // namespace detail
+
 }  // namespace mcslam::sim

@@ -14,11 +14,7 @@
 namespace mcslam::sim {
 namespace {
 
-// Streams of the seed (the paper's scenario uses 1-5 for points, path, noise and outliers; ObservePoints
-// draws 3-5 for every scenario).
-constexpr uint32_t kStreamPoints = 1;
-constexpr uint32_t kStreamScenarioPath = 6;
-constexpr uint32_t kStreamWorld = 7;
+using namespace detail;  // the seed's streams (paper_scenario.h), Num
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
@@ -323,8 +319,6 @@ Path ScenarioPath(const std::string& name, uint64_t seed, double speed) {
   if (name == "still-start") return StillStartPath(seed, speed);
   return PaperPathAt(seed, speed);  // paper, sparse
 }
-
-std::string Num(double v) { return fmt::format("{}", v); }
 
 }  // namespace
 

@@ -18,6 +18,7 @@
 
 #include "apps/options.h"
 #include "apps/slam_job.h"
+#include "compute/kernel_tolerance.h"
 #include "compute/backend.h"
 #include "compute/cuda/candidate.h"
 #include "compute/cuda/cuda_kernels.h"
@@ -38,17 +39,12 @@ using cuda::Candidate;
 // Tolerance of CPU vs CUDA scores. Each per-point distance of the CPU uses the hardware rsqrt estimate
 // (|rel err| < 2^-14 = 6.1e-5 with AVX-512, 1.5 * 2^-12 = 3.7e-4 with AVX), the GPU's rsqrtf is within 2
 // ulp, and every distance is positive, so the sum keeps that relative bound; float summation in the same
-// order on both adds < 2e-5 relative for a few hundred points: kRel. The hypotheses themselves differ by
+// order on both adds < 2e-5 relative for a few hundred points: kKernelRel. The hypotheses themselves differ by
 // a few ulp (the CPU normalises the quaternion with rsqrt + a Newton step, the GPU with rsqrtf), which
 // moves each projection by ~5e-5 px whatever its distance: kAbsPerTerm per point (or observation).
-#if defined(__AVX512F__)
-constexpr double kRel = 1e-4;
-#else
-constexpr double kRel = 5e-4;
-#endif
 constexpr double kAbsPerTerm = 1e-4;
 
-double Tolerance(double score, int terms) { return kRel * std::abs(score) + kAbsPerTerm * std::max(terms, 1); }
+double Tolerance(double score, int terms) { return kKernelRel * std::abs(score) + kAbsPerTerm * std::max(terms, 1); }
 
 // Why there is no device, as one line starting "no CUDA device".
 std::string NoDeviceMessage() {
@@ -664,7 +660,7 @@ std::ostream& operator<<(std::ostream& os, const RunDifference& d) {
 }
 
 // The tolerance of a whole run. A run is chaotic in its details: where the two backends pick different
-// hypotheses (scores equal within float tolerance, see kRel), every later frame samples around a slightly
+// hypotheses (scores equal within float tolerance, see kKernelRel), every later frame samples around a slightly
 // different pose, so the runs do not stay equal, only equally good. What bounds their distance is the
 // estimator's own spread, which runs with other seeds (another random table: a far larger change than a few
 // float round-offs) show. Measured on this 60-frame clean run at 2^16 hypotheses, seeds {1,3,5,7} against

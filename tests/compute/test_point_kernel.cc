@@ -3,17 +3,13 @@
 #include <cmath>
 #include <vector>
 
+#include "compute/kernel_tolerance.h"
 #include "compute/point_kernel.h"
 #include "compute/pose_fixture.h"
 
 namespace mcslam::compute {
 namespace {
 
-#if defined(__AVX512F__)
-constexpr double kRel = 1e-4;  // hardware rsqrt estimate, |rel err| < 2^-14, plus float sums
-#else
-constexpr double kRel = 5e-4;  // AVX rsqrt estimate, |rel err| < 1.5 * 2^-12
-#endif
 
 TEST(PointKernelCpu, FindsTheTruePointAndMatchesTheScalarReference) {
   const ArcCameras sc;  // five cameras on an arc, points near the origin
@@ -52,7 +48,7 @@ TEST(PointKernelCpu, FindsTheTruePointAndMatchesTheScalarReference) {
     for (int o = begin[p]; o < begin[p + 1]; ++o)
       ref += ReprojectionDistance(sc.poses[pose_idx[o]], best[p].position[0], best[p].position[1], best[p].position[2],
                                   ou[o], ov[o], sc.params);
-    EXPECT_NEAR(best[p].score, ref, kRel * ref + 1e-3);
+    EXPECT_NEAR(best[p].score, ref, kKernelRel * ref + 1e-3);
     // ... and it beats the centre (sample 0).
     double centre = 0;
     for (int o = begin[p]; o < begin[p + 1]; ++o)

@@ -5,17 +5,13 @@
 #include <stdexcept>
 #include <vector>
 
+#include "compute/kernel_tolerance.h"
 #include "compute/pose_fixture.h"
 #include "compute/pose_kernel.h"
 
 namespace mcslam::compute {
 namespace {
 
-#if defined(__AVX512F__)
-constexpr double kRel = 1e-4;
-#else
-constexpr double kRel = 5e-4;
-#endif
 
 // The scalar path of the shared header, in double for the sum: the reference the SIMD kernel must match.
 std::vector<double> ReferenceScores(const PoseFixture& fx, const NormalTable& table, int count) {
@@ -67,11 +63,11 @@ TEST(PoseKernelCpu, MatchesScalarReferenceAndPicksItsBest) {
     for (int i = 0; i < count; ++i) {
       // Each SIMD distance uses the hardware rsqrt estimate (|rel err| < 2^-14 = 6.1e-5 with AVX-512,
       // 3.7e-4 with AVX2 only); plus float summation: 1e-4 relative (5e-4 without AVX-512).
-      ASSERT_NEAR(scores[i], ref[i], kRel * ref[i] + 1e-4) << "hypothesis " << i << " points " << points;
+      ASSERT_NEAR(scores[i], ref[i], kKernelRel * ref[i] + 1e-4) << "hypothesis " << i << " points " << points;
       if (ref[i] < ref[ref_best]) ref_best = i;
     }
     EXPECT_EQ(best.score, scores[best.index]);
-    EXPECT_NEAR(ref[best.index], ref[ref_best], 2 * kRel * ref[ref_best] + 1e-4);
+    EXPECT_NEAR(ref[best.index], ref[ref_best], 2 * kKernelRel * ref[ref_best] + 1e-4);
   }
 }
 

@@ -14,7 +14,7 @@
 namespace mcslam::geometry {
 namespace {
 
-constexpr double kFocalPx = 500.0;
+constexpr double kPnpFocalPx = 500.0;
 
 struct Matches {
   std::vector<Eigen::Vector3d> points;
@@ -29,7 +29,7 @@ Matches MakeMatches(uint64_t seed, const Pose& truth, const Pose& decoy, int n_t
                     double noise_px) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-0.45, 0.45), depth(2, 6);
-  std::normal_distribution<double> g(0, noise_px / kFocalPx);
+  std::normal_distribution<double> g(0, noise_px / kPnpFocalPx);
   Matches m;
   auto add = [&](const Pose& seen_by, bool random_uv) {
     const double z = depth(rng);
@@ -73,7 +73,7 @@ TEST(SolvePnpNearRotation, AKnownOrientationRulesOutALargerWrongConsensus) {
   const Pose decoy = Turned(truth, 11, {1, 0.2, 0}, {0.4, 0.1, 0});
   const Eigen::Quaterniond prior = Turned(truth, 2, {0, 0, 1}, Eigen::Vector3d::Zero()).q;
   PnpOptions po;
-  po.focal_px = kFocalPx;
+  po.focal_px = kPnpFocalPx;
   po.min_inliers = 12;
   po.iterations = 500;
   for (uint64_t seed = 1; seed <= 20; ++seed) {
@@ -96,7 +96,7 @@ TEST(SolvePnpNearRotation, AKnownOrientationRulesOutALargerWrongConsensus) {
 TEST(SolvePnpNearRotation, NothingWhenNoPoseNearThePriorAgreesAndSeeded) {
   const Pose truth = Turned(Pose(), 10, {0, 1, 0}, {0, 0, 0.3});
   PnpOptions po;
-  po.focal_px = kFocalPx;
+  po.focal_px = kPnpFocalPx;
   po.min_inliers = 12;
   const Matches m = MakeMatches(3, truth, truth, 30, 0, 10, 0.5);
   const Eigen::Quaterniond far = Turned(truth, 12, {1, 0, 0}, Eigen::Vector3d::Zero()).q;
