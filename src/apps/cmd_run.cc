@@ -99,8 +99,9 @@ slam::SystemOptions ResolveSystemOptions(const RunArgs& a) {
   return options;
 }
 
-// --options-from: the report.json of an earlier run, checked to hold its System's options.
-nlohmann::json ReadOptionsReport(const std::string& path) {
+// --options-from: the report.json of an earlier run, checked to hold the options of this run's mode (a System's,
+// or with --known-map the known-map tracker's).
+nlohmann::json ReadOptionsReport(const std::string& path, bool known_map) {
   std::error_code ec;
   const std::filesystem::file_status st = std::filesystem::status(path, ec);
   if (ec || st.type() == std::filesystem::file_type::not_found)
@@ -111,10 +112,12 @@ nlohmann::json ReadOptionsReport(const std::string& path) {
   if (!f) throw std::invalid_argument(fmt::format("--options-from {}: cannot open it", path));
   nlohmann::json j = nlohmann::json::parse(f, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded()) throw std::invalid_argument(fmt::format("--options-from {}: not JSON", path));
-  if (!j.is_object() || !j.contains("options") || !j["options"].is_object() || !j["options"].contains("system") ||
-      !j["options"]["system"].is_object())
-    throw std::invalid_argument(fmt::format(
-        "--options-from {}: no options.system in it (the report.json of a `mcslam run` that built a map)", path));
+  const char* key = known_map ? "known_map" : "system";
+  if (!j.is_object() || !j.contains("options") || !j["options"].is_object() || !j["options"].contains(key) ||
+      !j["options"][key].is_object())
+    throw std::invalid_argument(fmt::format("--options-from {}: no options.{} in it (the report.json of a `mcslam run` "
+                                            "{})",
+                                            path, key, known_map ? "with --known-map" : "that built a map"));
   return j;
 }
 
@@ -129,6 +132,35 @@ slam::SystemOptions SystemOptionsFor(const RunArgs& a, const nlohmann::json* rep
     FromJson(OverlayChanges((*report)["options"]["system"], ToJson(defaults), ToJson(given)), &out);
     out.Check();
   } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+  }
+  return out;
+}
+
+// The known-map tracker's options: the flags', or with --options-from the earlier known-map run's with the flags
+// that change an option from its default on top.
+slam::KnownMapOptions KnownMapOptionsFor(const RunArgs& a, const nlohmann::json* report) {
+  auto resolve = [](const RunArgs& args) {
+    slam::KnownMapOptions o;
+    o.tracker = args.pose.Resolve();
+    o.smoother.alpha = args.smooth_alpha;
+    return o;
+  };
+  slam::KnownMapOptions out = resolve(a);
+  if (report) {
+    const slam::KnownMapOptions defaults = resolve(RunArgs{});
+    try {
+      out = defaults;
+      FromJson(OverlayChanges((*report)["options"]["known_map"], ToJson(defaults), ToJson(resolve(a))), &out);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+    }
+  }
+  try {
+    out.tracker.Check();
+    out.smoother.Check();
+  } catch (const std::invalid_argument& e) {
+    if (a.options_from.empty()) throw;
     throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
   }
   return out;
@@ -268,9 +300,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
 void Run(const RunArgs& a) {
   std::optional<nlohmann::json> report;
   if (!a.options_from.empty()) {
-    if (a.known_map)
-      throw std::invalid_argument("--options-from: a --known-map run takes its options from the command line only");
-    report = ReadOptionsReport(a.options_from);
+    report = ReadOptionsReport(a.options_from, a.known_map);
     spdlog::info("options from {} (flags given here on top)", a.options_from);
   }
   const nlohmann::json* rep = report ? &*report : nullptr;
@@ -289,10 +319,7 @@ void Run(const RunArgs& a) {
                                                       a.input));
   if (!a.known_map) return RunFullSlam(a, SystemOptionsFor(a, rep));
   RefuseFlagsWithoutEffect(a.mapping_flags, "with --known-map (the map is given: nothing is initialised or mapped)");
-  slam::KnownMapOptions options;
-  options.tracker = a.pose.Resolve();
-  options.smoother.alpha = a.smooth_alpha;
-  options.smoother.Check();
+  const slam::KnownMapOptions options = KnownMapOptionsFor(a, rep);
   auto kernel = MakePoseKernelFor(a.backend);
 
   const KnownMapInput input = LoadKnownMapInput(a.input);

@@ -41,6 +41,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames
                                                 local_ba_keyframes, local_ba_loss_sigmas, local_ba_min_loss_px,
                                                 local_ba_min_step_of_depth, local_ba_async, merge_revisited_points)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, predict_frames)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(KnownMapOptions, tracker, smoother)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,
                                                 ba_fixed_keyframes, tracker, init, mapping, smoother,
                                                 sigma_trans_floor_rel_depth, seed, relocalise_min_inliers,
@@ -107,11 +108,10 @@ void Read(const nlohmann::json& j, T* options, const char* what) {
 
 nlohmann::json ToJson(const slam::SystemOptions& options) { return options; }
 nlohmann::json ToJson(const frontend::FrontendOptions& options) { return options; }
-nlohmann::json ToJson(const slam::KnownMapOptions& options) {
-  return {{"tracker", options.tracker}, {"smoother", options.smoother}};
-}
+nlohmann::json ToJson(const slam::KnownMapOptions& options) { return options; }
 void FromJson(const nlohmann::json& j, slam::SystemOptions* options) { Read(j, options, "system"); }
 void FromJson(const nlohmann::json& j, frontend::FrontendOptions* options) { Read(j, options, "front end"); }
+void FromJson(const nlohmann::json& j, slam::KnownMapOptions* options) { Read(j, options, "known map"); }
 
 nlohmann::json OverlayChanges(nlohmann::json base, const nlohmann::json& defaults, const nlohmann::json& given) {
   if (!given.is_object()) return given != defaults ? given : base;

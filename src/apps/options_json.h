@@ -16,6 +16,7 @@ nlohmann::json ToJson(const slam::KnownMapOptions& options);  // {"tracker": ...
 // throws std::invalid_argument naming it.
 void FromJson(const nlohmann::json& j, slam::SystemOptions* options);
 void FromJson(const nlohmann::json& j, frontend::FrontendOptions* options);
+void FromJson(const nlohmann::json& j, slam::KnownMapOptions* options);
 // `base` with every value where `given` differs from `defaults` taken from `given` (objects compared field by
 // field, down to their leaves): the options of an earlier run with the flags changed on this command line on top.
 nlohmann::json OverlayChanges(nlohmann::json base, const nlohmann::json& defaults, const nlohmann::json& given);

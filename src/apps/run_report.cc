@@ -300,6 +300,13 @@ void ImageRun::WriteReport() {
                   {"end", options.end}};
   j["options"]["system"] = ToJson(sys_opts);  // every option: what the run did, from its report alone
   j["options"]["frontend"] = ToJson(fe_opts);
+  // The run's own flags (what the input, its camera and ground truth were, and what was written): with the two
+  // above, the command that reproduces the run.
+  j["options"]["image"] = {{"dataset", options.dataset},       {"camera", options.camera_path},
+                           {"gt", options.gt_path},            {"format", options.format},
+                           {"fps", options.fps},               {"gt_scale", options.gt_scale},
+                           {"relocalise", options.relocalise}, {"overlay", options.overlay_path},
+                           {"plot", options.plot_path},        {"viewer", options.viewer}};
   if (!options.load_map_path.empty() || !options.save_map_path.empty()) {
     j["map_files"] = nlohmann::json::object();
     if (!options.load_map_path.empty()) j["map_files"]["loaded"] = options.load_map_path;

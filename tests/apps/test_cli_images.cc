@@ -213,6 +213,11 @@ TEST(CliImages, ImageFolderRunsEndToEndAndWritesEveryOutput) {
   EXPECT_EQ(j["options"]["system"]["tracker"]["hypotheses"], 65536) << j["options"].dump();
   EXPECT_EQ(j["options"]["frontend"]["describe_async"], true) << j["options"].dump();
   EXPECT_EQ(j["options"]["frontend"]["anchor_mismatch"], "auto") << j["options"].dump();
+  // And the run's own: its ground truth, output format and outputs as given.
+  EXPECT_EQ(j["options"]["image"]["gt"], dir / "gt.txt") << j["options"].dump();
+  EXPECT_EQ(j["options"]["image"]["format"], "kitti") << j["options"].dump();
+  EXPECT_EQ(j["options"]["image"]["plot"], dir / "plot.png") << j["options"].dump();
+  EXPECT_EQ(j["options"]["image"]["camera"], "") << j["options"].dump();
   const io::Trajectory est = io::ReadTum(out + "/trajectory.txt");
   EXPECT_EQ(est.size(), 40u);
   EXPECT_EQ(io::ReadKitti(out + "/trajectory_kitti.txt", out + "/trajectory_kitti_times.txt").size(), 40u);

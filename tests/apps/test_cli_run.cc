@@ -649,9 +649,24 @@ TEST(CliRun, OptionsFromAReportReproduceTheRun) {
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_NE(r.output.find("--options-from " + file + ": " + needle), std::string::npos) << r.output;
   }
-  const auto km = RunMcslam("run " + dir / "s --known-map --out " + dir / "x --options-from " + dir / "a/report.json");
+  // A known-map run from a known-map run's report (its tracker's and smoother's options), and not from a report of
+  // the other mode: neither holds the other's options.
+  const std::string known = "run " + dir / "s --known-map --out ";
+  ASSERT_EQ(RunMcslam(known + dir / "ka --seed 5 --hypotheses 16384 --smooth-alpha 0.3").exit_code, 0);
+  const auto kb = RunMcslam(known + dir / "kb --options-from " + dir / "ka/report.json");
+  ASSERT_EQ(kb.exit_code, 0) << kb.output;
+  EXPECT_EQ(ReadText(dir / "kb/trajectory.txt"), ReadText(dir / "ka/trajectory.txt"));
+  const nlohmann::json kbo = testing::ReadJson(dir / "kb/report.json")["options"]["known_map"];
+  EXPECT_EQ(kbo, testing::ReadJson(dir / "ka/report.json")["options"]["known_map"]);
+  EXPECT_EQ(kbo["tracker"]["hypotheses"], 16384);
+  EXPECT_EQ(kbo["smoother"]["alpha"], 0.3);
+  const auto km = RunMcslam(known + dir / "x --options-from " + dir / "a/report.json");
   EXPECT_EQ(km.exit_code, 1);
-  EXPECT_NE(km.output.find("--options-from"), std::string::npos) << km.output;
+  EXPECT_NE(km.output.find("--options-from " + dir / "a/report.json: no options.known_map"), std::string::npos)
+      << km.output;
+  const auto mk = RunMcslam("run " + dir / "s --out " + dir / "x --options-from " + dir / "ka/report.json");
+  EXPECT_EQ(mk.exit_code, 1);
+  EXPECT_NE(mk.output.find("no options.system"), std::string::npos) << mk.output;
 }
 
 TEST(CliBench, PosePrintsEvaluationsPerSecond) {
