@@ -74,15 +74,16 @@ void RefuseFlagsWithoutEffect(const std::vector<const CLI::Option*>& flags, cons
 
 
 // The part of report.json that every run on a folder of observations shares.
-nlohmann::json RunReportHead(const RunArgs& a, const char* mode) {
+// `tracker`: the pose tracker's options as the run used them (with --options-from, the report's, not the flags').
+nlohmann::json RunReportHead(const RunArgs& a, const char* mode, const slam::PoseTrackerOptions& tracker) {
   nlohmann::json j;
   j["input"] = a.input;
   j["mode"] = mode;
   j["options"] = {{"backend", a.backend},
-                  {"hypotheses", a.pose.tracker.hypotheses},
-                  {"rounds", a.pose.tracker.rounds},
-                  {"seed", a.pose.tracker.seed},
-                  {"random", a.pose.random}};
+                  {"hypotheses", tracker.hypotheses},
+                  {"rounds", tracker.rounds},
+                  {"seed", tracker.seed},
+                  {"random", tracker.random == slam::RandomMode::kTable ? "table" : "fresh"}};
   return j;
 }
 
@@ -247,7 +248,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
                                  res.reports.size(), counts.tracked, counts.lost, counts.not_initialised,
                                  counts.keyframes, res.map.points.size(),
                                  UpperMedian(ms), fps);
-  nlohmann::json j = RunReportHead(a, "slam");
+  nlohmann::json j = RunReportHead(a, "slam", options.tracker);
   j["options"]["samples_per_point"] = options.mapping.samples;
   j["options"]["system"] = ToJson(options);  // every option: what the run did, from its report alone
   j["frames"] = res.reports.size();
@@ -367,7 +368,7 @@ void Run(const RunArgs& a) {
   const double fps = results.size() / std::max(times.wall_s, 1e-9);
   std::string line = fmt::format("frames={} tracked={} lost={} keyframes={} pose_ms_median={:.3f} fps={:.1f}",
                                  results.size(), tracked + 1, lost, keyframes, UpperMedian(ms), fps);
-  nlohmann::json j = RunReportHead(a, "known_map");
+  nlohmann::json j = RunReportHead(a, "known_map", options.tracker);
   j["options"]["known_map"] = ToJson(options);  // every option: what the run did, from its report alone
   j["frames"] = results.size();
   j["tracked"] = tracked + 1;  // the first frame's pose is given
@@ -509,8 +510,9 @@ void RegisterRun(CLI::App& app) {
   args->known_map_flags = {cmd->get_option("--sigma-trans-floor")};
   AddBackendFlag(cmd, &args->backend);
   cmd->add_option("--options-from", args->options_from,
-                  "Take every option from an earlier run's report.json (its System's and front end's); flags given "
-                  "here that change an option from its default apply on top");
+                  "Take every option from an earlier run's report.json (its System's and front end's, or with "
+                  "--known-map its tracker's and smoother's); flags given here that change an option from its "
+                  "default apply on top");
   const size_t image_from = cmd->get_options().size();
   AddImageJobFlags(cmd, &args->image);
   args->image_flags = OptionsSince(cmd, image_from);

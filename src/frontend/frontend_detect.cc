@@ -235,7 +235,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     const auto [vel, sigma] = InitialVelocity(t.uv, n_carried);
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
     t.remapped = true;
-    t.descriptor = req->descriptor;  // the map point keeps the look it was mapped with
+    t.descriptor = req->descriptor;  // its last look, whichever look matched (refreshed while it is tracked)
     if (o.anchor_every > 0) t.anchor = MonitorPatch(gray, t.uv, o);
     tracks.push_back(std::move(t));
     result->remapped_ids.push_back(req->feature_id);

@@ -184,9 +184,11 @@ std::vector<frontend::RemapRequest> VisualSlam::RemapRequests() {
     const bool late = tries.failures >= options_.remap_tries_every_frame;
     const bool deferred = late && back_off && (now + p->id) % options_.remap_retry_every != 0;
     if (late && !deferred) late_requested_.insert(p->id);
-    const auto first = first_descriptors_.find(p->id);
-    requests.push_back({p->id, lost_descriptors_.at(p->id), uv, deferred,
-                        first != first_descriptors_.end() ? std::optional(first->second) : std::nullopt});
+    const frontend::Descriptor& last = lost_descriptors_.at(p->id);
+    const auto first = first_descriptors_.find(p->id);  // tried too where it differs from the last look
+    requests.push_back({p->id, last, uv, deferred,
+                        first != first_descriptors_.end() && first->second != last ? std::optional(first->second)
+                                                                                   : std::nullopt});
   }
   // Only the points in view now keep their count (the map's size stays that of the view).
   std::erase_if(remap_tries_, [&](const auto& kv) { return kv.second.in_view_at != now; });

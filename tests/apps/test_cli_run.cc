@@ -660,6 +660,10 @@ TEST(CliRun, OptionsFromAReportReproduceTheRun) {
   EXPECT_EQ(kbo, testing::ReadJson(dir / "ka/report.json")["options"]["known_map"]);
   EXPECT_EQ(kbo["tracker"]["hypotheses"], 16384);
   EXPECT_EQ(kbo["smoother"]["alpha"], 0.3);
+  // The summary options at the report's top are the ones the run used too, not the flags'.
+  const nlohmann::json kb_top = testing::ReadJson(dir / "kb/report.json")["options"];
+  EXPECT_EQ(kb_top["hypotheses"], 16384);
+  EXPECT_EQ(kb_top["seed"], 5);
   const auto km = RunMcslam(known + dir / "x --options-from " + dir / "a/report.json");
   EXPECT_EQ(km.exit_code, 1);
   EXPECT_NE(km.output.find("--options-from " + dir / "a/report.json: no options.known_map"), std::string::npos)

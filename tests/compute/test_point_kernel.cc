@@ -10,7 +10,6 @@
 namespace mcslam::compute {
 namespace {
 
-
 TEST(PointKernelCpu, FindsTheTruePointAndMatchesTheScalarReference) {
   const ArcCameras sc;  // five cameras on an arc, points near the origin
   const float truth[2][3] = {{0.1f, -0.05f, 0.2f}, {-0.2f, 0.1f, -0.1f}};

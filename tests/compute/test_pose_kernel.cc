@@ -12,7 +12,6 @@
 namespace mcslam::compute {
 namespace {
 
-
 // The scalar path of the shared header, in double for the sum: the reference the SIMD kernel must match.
 std::vector<double> ReferenceScores(const PoseFixture& fx, const NormalTable& table, int count) {
   std::vector<double> scores(count);
