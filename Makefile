@@ -6,9 +6,10 @@ JOBS ?= $(shell nproc)
 DEMO_OUT ?= out/demo
 CMAKE_FLAGS ?=
 # Unity builds (CMake joins each target's sources into a few translation units): the inline code every source
-# instantiates again (Eigen, fmt, CLI11, json) is compiled once per unit instead of once per file. The whole native
-# build took 366 CPU-s against 548 without (CUDA off, 2 cores; docs/hostile_input.md). A plain `cmake` configure
-# keeps one unit per file (the faster incremental rebuild, and every source is checked on its own includes).
+# instantiates again (Eigen, fmt, CLI11, json) is compiled once per unit instead of once per file. The native
+# build took 367 CPU-s against 570 without, the sanitized one 492 against 784 (2 cores; docs/hostile_input.md).
+# A plain `cmake` configure keeps one unit per file (the faster incremental rebuild, and every source is checked
+# on its own includes).
 UNITY ?= ON
 
 .PHONY: all deps configure build test test-portable test-sanitize fuzz demo bench clean

@@ -143,25 +143,20 @@ slam::SystemOptions SystemOptionsFor(const RunArgs& a, const nlohmann::json* rep
 slam::KnownMapOptions KnownMapOptionsFor(const RunArgs& a, const nlohmann::json* report) {
   auto resolve = [](const RunArgs& args) {
     slam::KnownMapOptions o;
-    o.tracker = args.pose.Resolve();
+    o.tracker = args.pose.Resolve();  // checked there
     o.smoother.alpha = args.smooth_alpha;
+    o.smoother.Check();
     return o;
   };
-  slam::KnownMapOptions out = resolve(a);
-  if (report) {
-    const slam::KnownMapOptions defaults = resolve(RunArgs{});
-    try {
-      out = defaults;
-      FromJson(OverlayChanges((*report)["options"]["known_map"], ToJson(defaults), ToJson(resolve(a))), &out);
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
-    }
-  }
+  const slam::KnownMapOptions given = resolve(a);
+  if (!report) return given;
+  const slam::KnownMapOptions defaults = resolve(RunArgs{});
+  slam::KnownMapOptions out = defaults;
   try {
+    FromJson(OverlayChanges((*report)["options"]["known_map"], ToJson(defaults), ToJson(given)), &out);
     out.tracker.Check();
     out.smoother.Check();
   } catch (const std::invalid_argument& e) {
-    if (a.options_from.empty()) throw;
     throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
   }
   return out;

@@ -17,8 +17,9 @@ double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 }
 
 // Inlier flags and their count for a rotation; the sum of squared inlier angles in `sq_sum`.
-int ScoreRotation(const Eigen::Matrix3d& r, std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam,
-          double threshold_rad, std::vector<uint8_t>* inlier, double* sq_sum) {
+int ScoreRotation(const Eigen::Matrix3d& r, std::span<const Eigen::Vector3d> ref,
+                  std::span<const Eigen::Vector3d> cam, double threshold_rad, std::vector<uint8_t>* inlier,
+                  double* sq_sum) {
   int n = 0;
   *sq_sum = 0;
   inlier->assign(ref.size(), 0);
