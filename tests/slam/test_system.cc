@@ -272,7 +272,7 @@ TEST(System, PlanarSceneInitialisesFromTheHomography) {
 
 // A scene with little texture (the sparse scenario: 26-35 points in view, against the 40 shared features the
 // initialisation asks for on a textured scene): the counts are lowered to 60 % of the features the frame tracks
-// (down to 20), so that it initialises instead of waiting for ever (issue #16).
+// (down to 12), so that it initialises instead of waiting for ever (issue #16).
 TEST(System, SparseSceneInitialisesFromTheFewFeaturesItHas) {
   for (uint64_t seed = 1; seed <= 4; ++seed) {
     sim::ScenarioOptions so;
@@ -340,14 +340,14 @@ TEST(System, InitialisationWindowHoldsAtLeastThreeFrames) {
   }
 }
 
-// The reference moves on while waiting (frame 10 keeps only 12 features, fewer than the 20 that the lowered
-// min_common_features asks of a frame tracking so few, and frame 11 then shares 12 with frame 10, fewer than
-// the 40 it asks of a frame tracking ~190): the map is made from frame 11 on. The
+// The reference moves on while waiting (frame 10 keeps one feature fewer than the floor, min_count_floor, that
+// the lowered min_common_features asks of a frame tracking so few, and frame 11 then shares those with frame 10,
+// fewer than the 40 it asks of a frame tracking ~190): the map is made from frame 11 on. The
 // frames before it see the same points and are placed against the first map: every frame has a pose, those
 // as accurate as the rest. Without it they stay unposed.
 TEST(System, FramesBeforeAMovedReferenceArePosedAgainstTheFirstMap) {
   apps::SequenceInput in = Scenario(120, 0.0, 0.0);
-  in.frames[10].features.resize(12);
+  in.frames[10].features.resize(static_cast<size_t>(InitOptions{}.min_count_floor - 1));
   for (bool pose_before : {true, false}) {
     SystemOptions o = FastOptions();
     o.init.pose_frames_before_reference = pose_before;
