@@ -1,0 +1,255 @@
+// The System's initialisation (paper §6.1) on the synthetic scenario's observations: when it waits, a plane, a
+// scene with few features, the window's frames, the frames before a reference that moved on, the settling's
+// mirror test.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "core/random.h"
+#include "eval/trajectory_eval.h"
+#include "sim/paper_scenario.h"
+#include "sim/scenarios.h"
+#include "slam/system.h"
+#include "slam/system_internal.h"
+#include "system_test_util.h"
+
+namespace mcslam::slam {
+namespace {
+
+using namespace test;  // Scenario, FastOptions, RunSystem
+
+// The initialisation's ambiguity test counts a window's observations as n (1 - rho) / (1 + rho), rho the pooled
+// lag-1 correlation of the tracks' residuals. 200 tracks of 20 residuals: independent Gaussian noise gives rho
+// within 4 standard errors (1 / sqrt(3800)) of 0; an AR(1) sequence with phi = 0.8 (started stationary) gives 0.8
+// within 0.05 (its standard error is ~0.01 here); a constant bias gives 1; no pair of consecutive residuals gives 0.
+TEST(PooledLag1Correlation, NoiseBiasAndAR1) {
+  CounterRng rng(7, 1);
+  std::vector<std::vector<Eigen::Vector2d>> noise(200), ar1(200), bias(200);
+  for (int t = 0; t < 200; ++t) {
+    Eigen::Vector2d last(rng.Normal(), rng.Normal());
+    const Eigen::Vector2d b(rng.Normal(), rng.Normal());
+    for (int k = 0; k < 20; ++k) {
+      const double nu = rng.Normal(), nv = rng.Normal();
+      noise[t].emplace_back(nu, nv);
+      last = 0.8 * last + std::sqrt(1 - 0.64) * Eigen::Vector2d(rng.Normal(), rng.Normal());
+      ar1[t].push_back(last);
+      bias[t].push_back(b);
+    }
+  }
+  EXPECT_LT(std::abs(detail::PooledLag1Correlation(noise)), 4.0 / std::sqrt(3800.0));
+  EXPECT_NEAR(detail::PooledLag1Correlation(ar1), 0.8, 0.05);
+  EXPECT_NEAR(detail::PooledLag1Correlation(bias), 1.0, 1e-12);
+  EXPECT_EQ(detail::PooledLag1Correlation({{Eigen::Vector2d(1, 2)}, {}}), 0.0);
+}
+
+TEST(System, StaticCameraNeverInitialises) {
+  apps::SequenceInput in = Scenario(40, 0.5, 0.0);
+  for (auto& f : in.frames) f.features = in.frames.front().features;  // the camera does not move
+  const apps::SlamRunResult res = RunSystem(in);
+  EXPECT_FALSE(res.initialised);
+  ASSERT_EQ(res.reports.size(), 40u);
+  for (const FrameReport& r : res.reports) EXPECT_EQ(r.status, FrameStatus::kWaitingForInit);
+  EXPECT_NE(res.reports.back().note.find("feature motion"), std::string::npos) << res.reports.back().note;
+}
+
+// Points on one plane (a table top under the box's place), seen by the scenario's moving camera: the essential
+// matrix is not determined (a homography explains the views), so the initialisation decomposes the homography
+// and lets the window of frames choose between its two motions (issue #16: planar scenes). Without that path
+// the system waited for ever.
+TEST(System, PlanarSceneInitialisesFromTheHomography) {
+  sim::PaperScenarioOptions so;
+  so.frames = 60;
+  const sim::SyntheticSequence seq = sim::MakePaperScenario(so);
+  apps::SequenceInput in;
+  in.camera = seq.camera;
+  in.groundtruth = sim::ToTrajectory(seq);
+  CounterRng rng(5, 0);
+  std::vector<Eigen::Vector3d> plane;
+  for (int i = 0; i < 300; ++i) {
+    // y first: the order in which GCC evaluated emplace_back(Uniform(), Uniform(), 0.3) (unspecified in C++;
+    // clang goes left to right), so both compilers make the same plane.
+    const double y = rng.Uniform(-0.6, 0.6), x = rng.Uniform(-0.6, 0.6);
+    plane.emplace_back(x, y, 0.3);
+  }
+  for (size_t k = 0; k < seq.cam_from_world.size(); ++k) {
+    FrameObservations f;
+    f.index = static_cast<int64_t>(k);
+    f.stamp_s = seq.stamps_s[k];
+    for (size_t i = 0; i < plane.size(); ++i) {
+      Eigen::Vector2d uv;
+      if (seq.camera.ProjectWorld(seq.cam_from_world[k], plane[i], &uv) && seq.camera.InImage(uv))
+        f.features.push_back({static_cast<int64_t>(i), uv});
+    }
+    in.frames.push_back(f);
+  }
+  apps::SlamRunResult res;
+  ASSERT_NO_THROW(res = RunSystem(in, /*gt_scale=*/false));
+  ASSERT_EQ(res.reports.size(), 60u);
+  ASSERT_TRUE(res.initialised);
+  int tracked = 0, init_frame = -1;
+  for (const FrameReport& r : res.reports) {
+    tracked += r.status == FrameStatus::kTracked;
+    if (r.initialisation && !r.note.empty() && init_frame < 0) init_frame = static_cast<int>(r.index);
+  }
+  // Measured: initialised at frame 12 (frames 7-11 wait: the plane's second motion explains the window as
+  // well), every frame tracked.
+  EXPECT_LE(init_frame, 30);
+  EXPECT_EQ(tracked, 60);
+  const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+  EXPECT_FALSE(err.mirrored);
+  std::printf("[ planar   ] initialised at frame %d, ATE mean %.5f m, rotation mean %.3f deg\n", init_frame,
+              err.ate_m.mean, err.rot_deg.mean);
+  // Clean data: measured 0.7 mm mean (0.2 deg); the noisy scenario's bound, 2 cm, is far above that and far below
+  // the wrong motion of the homography's pair (centimetres to decimetres off).
+  EXPECT_LT(err.ate_m.mean, 0.02);
+  EXPECT_LT(err.rot_deg.mean, 1.0);
+}
+
+// A scene with little texture (the sparse scenario: 26-35 points in view, against the 40 shared features the
+// initialisation asks for on a textured scene): the counts are lowered to 60 % of the features the frame tracks
+// (down to 12), so that it initialises instead of waiting for ever (issue #16).
+TEST(System, SparseSceneInitialisesFromTheFewFeaturesItHas) {
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    sim::ScenarioOptions so;
+    so.name = "sparse";
+    so.frames = 150;
+    so.noise_px = 0.5;
+    so.seed = seed;
+    const apps::SequenceInput in = apps::KnownMapInputFromSequence(sim::MakeScenario(so));
+    size_t most = 0;
+    for (const FrameObservations& f : in.frames) most = std::max(most, f.features.size());
+    ASSERT_LT(most, static_cast<size_t>(InitOptions{}.min_common_features));  // the old gate could never pass
+    apps::SlamRunResult res;
+    ASSERT_NO_THROW(res = RunSystem(in, /*gt_scale=*/false));
+    ASSERT_TRUE(res.initialised) << "seed " << seed;
+    int tracked = 0, init_frame = -1;
+    for (const FrameReport& r : res.reports) {
+      tracked += r.status == FrameStatus::kTracked;
+      if (r.initialisation && !r.note.empty() && init_frame < 0) init_frame = static_cast<int>(r.index);
+    }
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    std::printf("[ sparse   ] seed %d: %zu features at most, initialised at frame %d, %d of 150 tracked, ATE mean "
+                "%.4f m, rotation mean %.3f deg\n",
+                static_cast<int>(seed), most, init_frame, tracked, err.ate_m.mean, err.rot_deg.mean);
+    // Measured over seeds 1-8 (CLI, the same options but 2^18 hypotheses): initialised at frames 14-44,
+    // every frame tracked, 0.9-1.2 cm and 0.25-1.0 deg mean. Bounds: the robustness matrix's 30 % of the
+    // frames for the start; twice the largest measured error.
+    EXPECT_LE(init_frame, 45) << "seed " << seed;
+    EXPECT_EQ(tracked, 150) << "seed " << seed;
+    EXPECT_FALSE(err.mirrored) << "seed " << seed;
+    EXPECT_LT(err.ate_m.mean, 0.024) << "seed " << seed;
+    EXPECT_LT(err.rot_deg.mean, 2.0) << "seed " << seed;
+  }
+}
+
+// Fast motion (the fast scenario, observations only): two frames already hold enough motion and parallax to
+// initialise. Two views leave the depth reversal open (and a window of two fits its own noise), so the
+// initialisation waits for a third frame (InitOptions::min_window_frames); allowed two, it takes frames 0
+// and 1 (the rendered seed 6 came out mirrored so).
+TEST(System, InitialisationWindowHoldsAtLeastThreeFrames) {
+  sim::ScenarioOptions so;
+  so.name = "fast";
+  so.frames = 40;
+  so.noise_px = 0.2;
+  so.seed = 6;
+  const apps::SequenceInput in = apps::KnownMapInputFromSequence(sim::MakeScenario(so));
+  for (int min_window : {3, 2}) {
+    SystemOptions o = FastOptions();
+    o.init.min_window_frames = min_window;
+    std::string note;
+    const apps::SlamRunResult res =
+        apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), /*gt_scale=*/false,
+                      [&](const FrameReport& r) {
+                        if (r.initialisation && !r.note.empty() && note.empty()) note = r.note;
+                      });
+    ASSERT_TRUE(res.initialised) << min_window;
+    const size_t at = note.find("window of ");
+    ASSERT_NE(at, std::string::npos) << note;
+    const int window = std::atoi(note.c_str() + at + 10);
+    std::printf("[ window   ] min_window_frames %d: %s\n", min_window, note.c_str());
+    if (min_window == 3) {
+      EXPECT_GE(window, 3) << note;
+    } else {
+      EXPECT_EQ(window, 2) << note;  // the gate is what made the difference
+    }
+  }
+}
+
+// The reference moves on while waiting (frame 10 keeps one feature fewer than the floor, min_count_floor, that
+// the lowered min_common_features asks of a frame tracking so few, and frame 11 then shares those with frame 10,
+// fewer than the 40 it asks of a frame tracking ~190): the map is made from frame 11 on. The
+// frames before it see the same points and are placed against the first map: every frame has a pose, those
+// as accurate as the rest. Without it they stay unposed.
+TEST(System, FramesBeforeAMovedReferenceArePosedAgainstTheFirstMap) {
+  apps::SequenceInput in = Scenario(120, 0.0, 0.0);
+  in.frames[10].features.resize(static_cast<size_t>(InitOptions{}.min_count_floor - 1));
+  for (bool pose_before : {true, false}) {
+    SystemOptions o = FastOptions();
+    o.init.pose_frames_before_reference = pose_before;
+    std::string first_init_note;  // what the CLI logs and report.json keeps as the initialisation's
+    const apps::SlamRunResult res =
+        apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), /*gt_scale=*/true,
+                      [&](const FrameReport& r) {
+                        if (r.initialisation && !r.note.empty() && first_init_note.empty()) first_init_note = r.note;
+                      });
+    ASSERT_TRUE(res.initialised);
+    ASSERT_EQ(res.reports.size(), 120u);
+    EXPECT_EQ(first_init_note.rfind("initialised from frames 11 and", 0), 0u) << first_init_note;
+    int reference = -1;  // the first frame the initialisation's window holds
+    for (const FrameReport& r : res.reports)
+      if (r.initialisation && r.keyframe) {
+        reference = static_cast<int>(r.index);
+        break;
+      }
+    ASSERT_EQ(reference, 11) << "the reference did not move on as this test needs";
+    for (int i = 0; i < reference; ++i) {
+      const FrameReport& r = res.reports[i];
+      if (pose_before) {
+        EXPECT_EQ(r.status, FrameStatus::kTracked) << i;
+        EXPECT_NE(r.note.find("before its reference frame"), std::string::npos) << i << ": " << r.note;
+      } else {
+        EXPECT_EQ(r.status, FrameStatus::kWaitingForInit) << i;
+        EXPECT_FALSE(r.has_pose) << i;
+      }
+    }
+    for (int i = reference; i < 120; ++i) EXPECT_EQ(res.reports[i].status, FrameStatus::kTracked) << i;
+    if (!pose_before) continue;
+    // Clean data. Measured: frames 0-10 within 0.10-0.14 mm of the truth, the whole run 0.39 mm on average.
+    // Bounds: 2 mm for those frames (a pose copied from a neighbour would be off by a frame's motion), and the
+    // clean scenario test's 5 mm for the run.
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    ASSERT_EQ(err.matched(), 120u);
+    for (const eval::FrameError& e : err.frames)
+      if (e.est_index < static_cast<size_t>(reference)) {
+        EXPECT_LT(e.trans_err_m, 0.002) << "frame " << e.est_index;
+      }
+    EXPECT_LT(err.ate_m.mean, 0.005);
+  }
+}
+
+// The settling's depth-reversal test (System::FlipIfMirrored) leaves a right map alone on noisy tracks: the noisy
+// paper scenario (1 px, 10 % outliers) initialises on the scene, not its mirror, and at the first settling steps
+// (16-30 frames, ~5 deg) its mirror fits the window about as well. Under clang's rounding seed 1's first step had
+// the mirror ahead by a chi-square of 22-35 (2.79 or 2.98 px^2 against 2.47): flipped, the run ended with every
+// orientation ~176 deg off. Seeds whose first settling step comes within 60 frames here; a flipped map's
+// orientations are >= 90 deg off, a right one's < 2 (bound 10 deg).
+TEST(System, ARightMapIsNotFlippedByTheSettlingsMirrorTest) {
+  for (uint64_t seed : {1, 3, 5, 16}) {
+    const apps::SequenceInput in = Scenario(60, 1.0, 0.1, seed);
+    const apps::SlamRunResult res = RunSystem(in);
+    ASSERT_TRUE(res.initialised) << "seed " << seed;
+    int settling_steps = 0;
+    for (const FrameReport& r : res.reports) {
+      EXPECT_FALSE(r.depth_reversed) << "seed " << seed << " frame " << r.index << ": " << r.note;
+      settling_steps += r.note.find("settling:") != std::string::npos || r.note.rfind("settled", 0) == 0;
+    }
+    EXPECT_GE(settling_steps, 1) << "seed " << seed;  // the test ran
+    const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+    EXPECT_LT(err.rot_deg.mean, 10.0) << "seed " << seed;
+  }
+}
+
+}  // namespace
+}  // namespace mcslam::slam
