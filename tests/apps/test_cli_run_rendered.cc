@@ -1,0 +1,255 @@
+// The whole pipeline through `mcslam synth --render` and `mcslam run` on rendered scenarios: the paper's scene,
+// a turn away from the map and the provisional map that bridges it, a car's bend, a gap of unreadable frames.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "cli_report.h"
+#include "test_util.h"
+
+namespace mcslam {
+namespace {
+
+using testing::Field;
+using testing::RunMcslam;
+using testing::TempDir;
+
+TEST(CliRun, RenderedPaperScenarioEndToEndFromImages) {
+  // mcslam synth --render: the textured box ray-cast for each exact pose; then the whole pipeline, front end
+  // included, from the images alone.
+  TempDir dir;
+  const auto s = RunMcslam("synth --scenario paper --frames 90 --render --out " + dir / "s");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  ASSERT_TRUE(std::filesystem::exists(dir / "s/images/000089.png"));
+  const auto r = RunMcslam("run " + dir / "s --dataset synthetic --hypotheses 65536 --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=90 lost=0"), std::string::npos) << r.output;
+  // Measured 4.6 mm (Sim(3) RMSE) on this 90-frame run; 2 cm, the paper's bound, leaves a 4x margin.
+  const double ate = std::stod(r.output.substr(r.output.find("ate_rmse=") + 9));
+  EXPECT_LT(ate, 0.02);
+  // --gt-scale on the image path: the first baseline gets its true length, so the Sim(3) alignment needs
+  // (almost) no scale. Scale drift over 90 frames stays within 25 % here.
+  const auto g = RunMcslam("run " + dir / "s --dataset synthetic --gt-scale --hypotheses 65536 --out " + dir / "g");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  const double scale = std::stod(g.output.substr(g.output.find(" scale=") + 7));
+  EXPECT_NEAR(scale, 1.0, 0.25) << g.output;
+}
+
+// The target for the rendered paper scenario (`make demo`): the whole 300-frame sequence from its
+// images, mean translation error <= 2 cm and mean rotation error <= 1 degree after Sim(3) alignment.
+TEST(CliRun, RenderedPaperScenarioMeetsThePapersPrecisionFromImages) {
+  TempDir dir;
+  const auto s = RunMcslam("synth --scenario paper --seed 1 --render --out " + dir / "s");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  const auto r = RunMcslam("run " + dir / "s --dataset synthetic --out " + dir / "r");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("tracked=300 lost=0"), std::string::npos) << r.output;
+  // Measured 0.65 cm and 0.60 deg (seed 1; seeds 2 and 3: 0.30 cm / 0.13 deg, 1.8 cm / 0.98 deg). Before the
+  // tracks were aligned with their birth patch (--anchor-every 0) 8.2 cm and 3.5 deg: the bounds are the issue's.
+  EXPECT_LT(Field(r.output, "ate_mean"), 0.02) << r.output;
+  EXPECT_LT(Field(r.output, "rot_mean_deg"), 1.0) << r.output;
+}
+
+// A second of unreadable frames (120-149 of 170). Most tracks survive the jump, but the pose is too far from
+// the last one for the Monte Carlo search around it: frame 150 finds 10 of 37 points agreeing (lost: before
+// the inlier-ratio rule that was taken as tracking, 0.77 m off, and every later frame followed it, 0.5-0.8 m).
+// Relocalisation, tried after skipped frames (RANSAC PnP on the frame's features matched to map points),
+// finds the pose at frame 150 with 36 of 37, and tracking goes on (measured: 140 tracked, worst 1.3 cm);
+// without it every frame after the gap is lost. Either way no frame is tracked wrong.
+struct GapRun {
+  int tracked_after_gap = 0;
+  double worst_m = 0;
+  std::string output;
+};
+GapRun RunOverAGap(const std::string& scenario, const std::string& out, const std::string& flags) {
+  GapRun g;
+  const auto r = RunMcslam("run " + scenario + " --dataset synthetic --out " + out + " " + flags);
+  g.output = r.output;
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(Field(r.output, "skipped"), 30) << r.output;
+  const std::string csv = out + "/frames.csv";
+  const std::vector<std::string> index = testing::CsvColumn(csv, "index"), status = testing::CsvColumn(csv, "status"),
+                                 terr = testing::CsvColumn(csv, "trans_err_m");  // after the Sim(3) alignment
+  EXPECT_FALSE(index.empty());
+  for (size_t i = 0; i < index.size(); ++i) {
+    if (status[i] != "tracked") continue;
+    if (terr[i].empty()) {
+      ADD_FAILURE() << "tracked frame " << index[i] << " has no error against the ground truth";
+      continue;
+    }
+    g.tracked_after_gap += std::stoi(index[i]) >= 150;
+    g.worst_m = std::max(g.worst_m, std::stod(terr[i]));
+  }
+  return g;
+}
+
+// Renders the rotation scenario of `seed` into dir/s and runs it with default settings (and `extra`) into dir/r;
+// the run's result (its exit code asserted by the caller).
+testing::CommandResult RunRenderedRotation(const TempDir& dir, int seed, const std::string& extra = "") {
+  const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed {} --render --out {}", seed, dir / "s"));
+  EXPECT_EQ(s.exit_code, 0) << s.output;
+  return RunMcslam(fmt::format("run {} --dataset synthetic --seed {} {} --out {}", dir / "s", seed, extra, dir / "r"));
+}
+
+// The rendered rotation scenario: the camera pans away from everything mapped (a turn, tracked about the last
+// centre), moves on through the unmapped half of the room, and pans back. Before the bridge every frame of the
+// move was lost (205 and 200 of 270 frames tracked on seeds 3 and 4); now a provisional map made from two views
+// at the turn's end carries the track (settled as the first map is), and joins the map when the pan back
+// relocalises a frame against it: scaled about the anchor (seeds 1 and 3: its scale had been guessed 0.959x and
+// 1.457x off), then its keyframes adjusted between the anchor and the joining frame. Seed 1 also anchors the
+// provisional map one frame before the turn's last accepted one, where the tracks had begun to disagree (0.29
+// px rms against 0.1). Measured 270 / 270 frames tracked on both seeds, ATE 0.71 / 0.27 cm (seed 1 was 35 cm at
+// e47f435 and 4.0 cm with the anchor alone, the join scaled but not adjusted; seeds 1 and 3-10 now 0.27-3.0 cm,
+// docs/rotation_only.md). Bounds: every frame tracked but 3; ATE under 2 cm (3x seed 1, and under the median of
+// the seeds without the adjustment, 3.3 cm); the join adjusted the bridge's keyframes.
+TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
+  for (const int seed : {1, 3}) {
+    TempDir dir;
+    const auto r = RunRenderedRotation(dir, seed);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_GE(Field(r.output, "tracked"), 267) << "seed " << seed << ": " << r.output;
+    EXPECT_LT(Field(r.output, "ate_rmse"), 0.02) << "seed " << seed << ": " << r.output;
+    const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+    EXPECT_GT(report["provisional"].get<int>(), 20) << "seed " << seed;
+    int made = 0, joined = 0, adjusted = 0;
+    for (const std::string& note : testing::CsvColumn(dir / "r/frames.csv", "note")) {
+      made += note.find("provisional map from frames") != std::string::npos;
+      joined += note.find("the provisional map joins it") != std::string::npos;
+      if (const size_t at = note.find(" of its keyframes adjusted"); at != std::string::npos) {
+        const size_t from = note.rfind(' ', at - 1) + 1;
+        adjusted = std::max(adjusted, std::stoi(note.substr(from, at - from)));
+      }
+    }
+    EXPECT_GE(made, 1) << "seed " << seed;  // measured: one each, joined once
+    EXPECT_GE(joined, 1) << "seed " << seed;
+    EXPECT_GT(adjusted, 20) << "seed " << seed;  // measured: 70 on both
+    // Joined, no frame keeps the guessed scale.
+    EXPECT_EQ(report["guessed_scale"].get<int>(), 0) << "seed " << seed;
+    const std::vector<std::string> guessed = testing::CsvColumn(dir / "r/frames.csv", "guessed_scale");
+    EXPECT_EQ(std::count(guessed.begin(), guessed.end(), "1"), 0) << "seed " << seed;
+  }
+}
+
+// A provisional map that never joins the map (the run ends first, here; or it is lost) leaves its frames at the
+// scale it guessed, a Sim(3) away from the map's: frames.csv's guessed_scale and report.json's say which and how
+// many. Seed 1 cut at frame 180, before its join at 191: measured 59 frames (122-180, the provisional map's from
+// its anchor on) flagged, all of the run's provisional ones, and its ATE 5.5 cm (the scale guessed 1.28x off)
+// against 0.5 cm for the whole run. Bounds: at least 20 flagged, exactly the provisional frames, none before the
+// note that made the provisional map's anchor; the whole run flags none (the test above).
+TEST(CliRun, AProvisionalMapThatNeverJoinsLeavesItsFramesFlaggedAsAGuessedScale) {
+  TempDir dir;
+  const auto r = RunRenderedRotation(dir, 1, "--end 180");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+  EXPECT_GE(report["guessed_scale"].get<int>(), 20) << r.output;
+  EXPECT_EQ(report["guessed_scale"].get<int>(), report["provisional"].get<int>());
+  const std::vector<std::string> index = testing::CsvColumn(dir / "r/frames.csv", "index"),
+                                 guessed = testing::CsvColumn(dir / "r/frames.csv", "guessed_scale"),
+                                 note = testing::CsvColumn(dir / "r/frames.csv", "note");
+  ASSERT_EQ(guessed.size(), index.size());
+  EXPECT_EQ(std::count(guessed.begin(), guessed.end(), "1"), report["guessed_scale"].get<int>());
+  // The anchor, as the note that made the provisional map names it: "provisional map from frames A (...".
+  int anchor = -1;
+  for (const std::string& n : note)
+    if (const size_t at = n.find("provisional map from frames "); at != std::string::npos && anchor < 0)
+      anchor = std::stoi(n.substr(at + std::string("provisional map from frames ").size()));
+  ASSERT_GE(anchor, 0);
+  for (size_t i = 0; i < index.size(); ++i)
+    if (guessed[i] == "1") {
+      EXPECT_GT(std::stoi(index[i]), anchor) << "frame " << index[i];
+    }
+}
+
+// The bas-relief valley of a small-parallax window: held-out rotation seed 15 makes its provisional map from frames
+// 121-130 at 3.7 deg of parallax, where the two views' cost has two minima along the valley and every two-view
+// seed (8-point, 5-point) stopped in the wrong one: its rotation 6.6 deg where the camera turned 3.9, the move 55
+// deg off; that map was lost at frame 206 and the trajectory ended 64 cm off (21 % of the 2.97 m path).
+// The multi-start search of the valley (geometry::RelativePoseMinima) finds the other minimum, the true motion's,
+// which explains the window better (mean squared residual 0.0068 against 0.0084 px^2) but, refined, falls short
+// of the parallax asked for: it cannot be taken, and it stands against the wrong one, so the provisional map
+// waits ("ambiguous initialisation", frames 130-140) and is made at frame 141 from 11.9 deg of parallax. Measured:
+// the run to frame 210 (the provisional map joined at 196): 211 / 211 tracked, no frame at a guessed scale, ATE
+// 1.31 cm (0.69 % of the 1.90 m path); with the run's seeds 1-8 on this scene 0.84-2.34 cm (0.44-1.23 %).
+// Bounds: every frame tracked; none at a guessed scale; ATE under 3 % of the path (2.4x the worst run seed; the
+// wrong minimum's map was lost at 206). The run stops at 210 because what follows the join is a stage of its own
+// and chaotic on this scene: at frame 216 82 points are removed and the next ten frames are tracked on 10-20
+// inliers, and one remap more or less there moved the whole run's ATE from 2.2 to 4.3 cm (measured 2026-11-28).
+TEST(CliRun, ASmallParallaxProvisionalMapTakesTheBetterMinimumOfTheBasReliefValley) {
+  TempDir dir;
+  const auto r = RunRenderedRotation(dir, 15, "--end 210");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(Field(r.output, "tracked"), 211) << r.output;
+  EXPECT_LT(Field(r.output, "ate_rmse"), 0.03 * 1.90) << r.output;
+  const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+  EXPECT_GT(report["provisional"].get<int>(), 20) << r.output;
+  EXPECT_EQ(report["guessed_scale"].get<int>(), 0) << r.output;
+}
+
+// A car at 1 m a frame (the forward scenario, rendered: a 90-degree bend, 119 m): the map renews itself every few
+// frames, and with the paper's back end alone (poses and points never refined together) each generation of
+// points passes its scale and heading errors on to the next. The local bundle adjustment after each keyframe
+// holds them. Seed 9, measured: 120 / 120 tracked, ATE 16.5 cm with it; 117 / 120 and 5.2 m without (the
+// scale grew 1.9x after the bend). Over seeds 1-10 with it, 3-24 cm (docs/robustness.md). Bounds: every frame
+// tracked; ATE under 0.5 m (0.4 % of the path; ~2x the worst seed); the run without it at least 5x worse.
+TEST(CliRun, TheLocalBundleAdjustmentKeepsACarsScaleThroughItsBend) {
+  TempDir dir;
+  const auto s = RunMcslam("synth --scenario forward --seed 9 --render --out " + dir / "s");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  const auto with = RunMcslam(fmt::format("run {} --dataset synthetic --seed 9 --out {}", dir / "s", dir / "r"));
+  ASSERT_EQ(with.exit_code, 0) << with.output;
+  EXPECT_EQ(Field(with.output, "tracked"), 120) << with.output;
+  EXPECT_LT(Field(with.output, "ate_rmse"), 0.5) << with.output;
+  const auto without = RunMcslam(
+      fmt::format("run {} --dataset synthetic --seed 9 --local-ba-keyframes 0 --out {}", dir / "s", dir / "n"));
+  ASSERT_EQ(without.exit_code, 0) << without.output;
+  EXPECT_GT(Field(without.output, "ate_rmse"), 5 * Field(with.output, "ate_rmse")) << without.output;
+}
+
+// Frames 120-149 of the rendered paper scene unreadable: the camera moved on meanwhile. Scene seeds 1 and 2: on
+// seed 2, with relocalisation off, the first try at frame 150 (normal spread) took a pose 50-55 cm off from 25
+// of 46 stale tracks fitting loosely, until a first try after frames without a pose was checked as the second
+// try's is (PoseTracker::FitLimitPx). Measured over scene seeds 1-6: the default run's worst tracked frame
+// 1.3 / 1.4 / 2.7 / 4.0 / 7.0 / 1.7 cm (seed 5's: a frame relocalised from 32 matches all in one part of the
+// image, 7 cm and 2 degrees off, a weakness of relocalisation left open); no frame tracked wrong in the runs
+// without relocalisation.
+TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
+  for (const int seed : {1, 2}) {
+    SCOPED_TRACE(fmt::format("scene seed {}", seed));
+    TempDir dir;
+    const auto s = RunMcslam(fmt::format("synth --scenario paper --seed {} --render --frames 170 --out {}", seed,
+                                         dir / "s"));
+    ASSERT_EQ(s.exit_code, 0) << s.output;
+    for (int i = 120; i < 150; ++i) testing::WriteText(dir / fmt::format("s/images/{:06d}.png", i), "");
+    const GapRun with = RunOverAGap(dir / "s", dir / "r", "");
+    EXPECT_GE(Field(with.output, "tracked"), 120 + 18) << with.output;  // all before; all but 1-2 after
+    EXPECT_GE(with.tracked_after_gap, 18) << with.output;
+    // A frame tracked wrong is tens of centimetres off; the runs before the gap alone have 1.1 cm at worst.
+    EXPECT_LT(with.worst_m, 0.05);
+    const nlohmann::json report = testing::ReadJson(dir / "r/report.json");
+    EXPECT_GE(report["relocalisation"]["tracked"].get<int>(), 1) << report["relocalisation"].dump();
+    EXPECT_NE(with.output.find("relocalised from"), std::string::npos) << with.output;
+
+    // Neither relocalisation nor the pose step's wider second try: nothing after the gap (seed 2's first try is
+    // refused: its loose fit is what the check is for).
+    const GapRun without = RunOverAGap(dir / "s", dir / "n", "--no-relocalise --retry-rot-scale 0");
+    EXPECT_EQ(without.tracked_after_gap, 0) << without.output;
+    EXPECT_EQ(Field(without.output, "tracked"), 120) << without.output;
+    EXPECT_LT(without.worst_m, 0.05);
+    // The second try alone (4x the rotation spread) reaches across this gap too, and nothing it tracks is wrong:
+    // its loose fits are refused (PoseTrackerOptions::retry_max_residual_ratio; measured on seed 1: frames 150 and
+    // 151, 36 and 32 inliers at medians of 1.18 and 1.02 px against the recent frames' 0.08), then a frame is
+    // found and 18-20 frames after the gap are tracked. Taken unchecked, frame 150 came out 47 cm off in one build.
+    const GapRun wider = RunOverAGap(dir / "s", dir / "w", "--no-relocalise");
+    EXPECT_GE(wider.tracked_after_gap, 10) << wider.output;
+    EXPECT_LT(wider.worst_m, 0.05);
+  }
+}
+
+}  // namespace
+}  // namespace mcslam
