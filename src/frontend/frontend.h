@@ -21,6 +21,15 @@ inline constexpr int kDescriptorLength = 128;
 using Descriptor = std::array<float, kDescriptorLength>;
 float DescriptorDistance(const Descriptor& a, const Descriptor& b);  // L2
 
+struct FrontendOptions;
+
+// The detection grid of a W x H image: cell size and the least distance between corners (FrontendOptions).
+struct DetectionGrid {
+  int cell_px = 0;
+  double min_distance_px = 0;
+};
+DetectionGrid GridFor(const FrontendOptions& o, int width, int height);
+
 struct FrontendOptions {
   // ---- detection (Shi-Tomasi) -------------------------------------------------------------------------
   int max_features = 400;       // budget: tracks (re-attached ones included) never outnumber it
@@ -28,6 +37,11 @@ struct FrontendOptions {
   int max_new_per_cell = 2;     // new corners added to one empty cell in one frame
   double quality_level = 0.01;  // a corner's min eigenvalue must reach this fraction of the frame's largest
   double min_distance_px = 10;  // between new corners, and from a new corner to any tracked feature
+  // The grid holds at least min_cells_across cells along the image's shorter side: below 240 px (the paper's
+  // 320x240 with 40 px cells) the cells, and min_distance_px with them, shrink in proportion (GridFor). A fixed
+  // 40 px grid left a 160x120 image 12 cells, and the paper scenario there 2.2 % of its path off (0.17 % at
+  // 320x240), the rotation scenario lost for 76 frames, a car's 310x94 images lost from frame 36 on.
+  int min_cells_across = 6;
   int block_size = 3;           // structure tensor window (px)
   int border_px = 12;           // no corner nearer than this to the image edge
   // ---- tracking (pyramidal Lucas-Kanade) ----------------------------------------------------------------

@@ -9,10 +9,12 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   const FrontendOptions& o = options;
   const auto t_detect = Clock::now();
   const int W = gray.cols, H = gray.rows;
-  const int cells_x = (W + o.cell_size_px - 1) / o.cell_size_px, cells_y = (H + o.cell_size_px - 1) / o.cell_size_px;
+  const DetectionGrid grid = GridFor(o, W, H);
+  const int cell_px = grid.cell_px;
+  const int cells_x = (W + cell_px - 1) / cell_px, cells_y = (H + cell_px - 1) / cell_px;
   auto cell_of = [&](const cv::Point2f& p) {
-    const int cx = std::clamp(static_cast<int>(p.x) / o.cell_size_px, 0, cells_x - 1);
-    const int cy = std::clamp(static_cast<int>(p.y) / o.cell_size_px, 0, cells_y - 1);
+    const int cx = std::clamp(static_cast<int>(p.x) / cell_px, 0, cells_x - 1);
+    const int cy = std::clamp(static_cast<int>(p.y) / cell_px, 0, cells_y - 1);
     return cy * cells_x + cx;
   };
   std::vector<int> occupancy(static_cast<size_t>(cells_x * cells_y), 0);
@@ -56,7 +58,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     cv::dilate(eig, eig_dilated, cv::Mat());
     blocked.create(gray.size(), CV_8U);
     blocked.setTo(0);
-    const int radius = static_cast<int>(std::ceil(o.min_distance_px)) - 1;
+    const int radius = static_cast<int>(std::ceil(grid.min_distance_px)) - 1;
     if (radius >= 0)
       for (const Track& t : tracks)
         cv::circle(blocked, cv::Point(cvRound(t.uv.x), cvRound(t.uv.y)), radius, 255, cv::FILLED);
@@ -67,20 +69,18 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
       for (size_t c = 0; c < occupancy.size(); ++c) search[c] = occupancy[c] == 0;
     for (const RemapRequest* r : requests) {
       const int hw = o.remap_window_px;
-      const int x0 = std::max(0, static_cast<int>(r->uv_px.x()) - hw) / o.cell_size_px;
-      const int x1 = std::min(W - 1, static_cast<int>(r->uv_px.x()) + hw) / o.cell_size_px;
-      const int y0 = std::max(0, static_cast<int>(r->uv_px.y()) - hw) / o.cell_size_px;
-      const int y1 = std::min(H - 1, static_cast<int>(r->uv_px.y()) + hw) / o.cell_size_px;
+      const int x0 = std::max(0, static_cast<int>(r->uv_px.x()) - hw) / cell_px;
+      const int x1 = std::min(W - 1, static_cast<int>(r->uv_px.x()) + hw) / cell_px;
+      const int y0 = std::max(0, static_cast<int>(r->uv_px.y()) - hw) / cell_px;
+      const int y1 = std::min(H - 1, static_cast<int>(r->uv_px.y()) + hw) / cell_px;
       for (int cy = y0; cy <= y1; ++cy)
         for (int cx = x0; cx <= x1; ++cx) search[static_cast<size_t>(cy * cells_x + cx)] = 1;
     }
     for (int cy = 0; cy < cells_y; ++cy) {
       for (int cx = 0; cx < cells_x; ++cx) {
         if (!search[static_cast<size_t>(cy * cells_x + cx)]) continue;
-        const int xb = std::max(o.border_px, cx * o.cell_size_px),
-                  xe = std::min(W - o.border_px, (cx + 1) * o.cell_size_px);
-        const int yb = std::max(o.border_px, cy * o.cell_size_px),
-                  ye = std::min(H - o.border_px, (cy + 1) * o.cell_size_px);
+        const int xb = std::max(o.border_px, cx * cell_px), xe = std::min(W - o.border_px, (cx + 1) * cell_px);
+        const int yb = std::max(o.border_px, cy * cell_px), ye = std::min(H - o.border_px, (cy + 1) * cell_px);
         for (int y = yb; y < ye; ++y) {
           const float* e = eig.ptr<float>(y);
           const float* d = eig_dilated.ptr<float>(y);
@@ -105,7 +105,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   std::vector<size_t> fresh;
   {
     std::vector<int> per_cell(occupancy.size(), 0);
-    const double min_d2 = o.min_distance_px * o.min_distance_px;
+    const double min_d2 = grid.min_distance_px * grid.min_distance_px;
     std::vector<std::vector<size_t>> accepted_in_cell(occupancy.size());
     for (size_t k = 0; k < candidates.size() && static_cast<int>(fresh.size()) < budget; ++k) {
       const Candidate& c = candidates[k];
@@ -114,7 +114,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
       // min_distance against the corners already taken here and in the neighbouring cells.
       bool close = false;
       const int cx = c.cell % cells_x, cy = c.cell / cells_x;
-      const int reach = static_cast<int>(std::ceil(o.min_distance_px / o.cell_size_px));
+      const int reach = static_cast<int>(std::ceil(grid.min_distance_px / cell_px));
       for (int yy = std::max(0, cy - reach); yy <= std::min(cells_y - 1, cy + reach) && !close; ++yy)
         for (int xx = std::max(0, cx - reach); xx <= std::min(cells_x - 1, cx + reach) && !close; ++xx)
           for (size_t j : accepted_in_cell[static_cast<size_t>(yy * cells_x + xx)]) {
@@ -241,7 +241,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     result->remapped_ids.push_back(req->feature_id);
   }
   st.remapped = static_cast<int>(result->remapped_ids.size());
-  const double min_d2 = o.min_distance_px * o.min_distance_px;
+  const double min_d2 = grid.min_distance_px * grid.min_distance_px;
   for (size_t k : fresh) {
     if (static_cast<int>(tracks.size()) >= o.max_features) break;
     bool near_attached = false;

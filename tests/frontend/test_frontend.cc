@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <utility>
 #include <opencv2/imgproc.hpp>
 #include <set>
 #include <stdexcept>
@@ -149,6 +150,24 @@ TEST(Frontend, TracksAKnownSubpixelShift) {
   // typically; 0.25 px bounds the worst feature (one near a saturated or weakly textured spot).
   EXPECT_LT(median, 0.05);
   EXPECT_LT(worst, 0.25);
+}
+
+// The grid keeps its 40 px cells on images whose shorter side is 240 px or more (the paper's 320x240, VGA,
+// KITTI's 1241x376) and shrinks below, min_distance_px with it: at least min_cells_across (6) cells across.
+TEST(Frontend, TheDetectionGridShrinksOnlyBelowTheShorterSidesSixCells) {
+  const FrontendOptions o;
+  const std::pair<int, int> unchanged[] = {{320, 240}, {640, 480}, {1241, 376}, {752, 480}};
+  for (const auto& [w, h] : unchanged) {
+    EXPECT_EQ(GridFor(o, w, h).cell_px, 40) << w << "x" << h;
+    EXPECT_EQ(GridFor(o, w, h).min_distance_px, 10.0) << w << "x" << h;
+  }
+  EXPECT_EQ(GridFor(o, 160, 120).cell_px, 20);
+  EXPECT_EQ(GridFor(o, 160, 120).min_distance_px, 5.0);
+  EXPECT_EQ(GridFor(o, 310, 94).cell_px, 15);  // a car's camera at half resolution: 94 / 6
+  EXPECT_EQ(GridFor(o, 16, 12).cell_px, 4);    // never under 4 px (FrontendOptions::Check's least cell)
+  FrontendOptions fixed;
+  fixed.min_cells_across = 1;  // the fixed grid of before
+  EXPECT_EQ(GridFor(fixed, 160, 120).cell_px, 40);
 }
 
 TEST(Frontend, DetectsOnlyInEmptyCellsWithinTheBudget) {
