@@ -67,6 +67,16 @@ void Keep(const VisualSlamStep& step, Reports* reports) {
   for (const slam::FrameReport& r : step.reports) (*reports)[r.index] = r;
 }
 
+// Every frame of the scene through a VisualSlam with these options, and its Finish.
+Reports RunWhole(const Scene& scene, const VisualSlamOptions& options) {
+  VisualSlam vs(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+  Reports reports;
+  const int frames = static_cast<int>(scene.seq.cam_from_world.size());
+  for (int i = 0; i < frames; ++i) Keep(vs.Process(scene.Frame(i), i, i / kFps), &reports);
+  for (const slam::FrameReport& r : vs.Finish()) reports[r.index] = r;
+  return reports;
+}
+
 // Position error of each posed frame after a Sim(3) alignment of all of them onto the truth.
 std::map<int64_t, double> ErrorsAfterAlignment(const Scene& scene, const Reports& reports) {
   io::Trajectory gt, est;
@@ -152,11 +162,7 @@ TEST(VisualSlam, AStarvingMapTakesNewPointsFromTwoViewsSoFastMotionDoesNotLoseIt
   auto lost_after_init = [](const Scene& scene, int min_views) {
     VisualSlamOptions options;
     options.system.mapping.starving_min_track_frames = min_views;
-    VisualSlam vs(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
-    Reports reports;
-    const int frames = static_cast<int>(scene.seq.cam_from_world.size());
-    for (int i = 0; i < frames; ++i) Keep(vs.Process(scene.Frame(i), i, i / kFps), &reports);
-    for (const slam::FrameReport& r : vs.Finish()) reports[r.index] = r;
+    const Reports reports = RunWhole(scene, options);
     int lost = 0;
     for (const auto& [i, r] : reports) lost += r.status == slam::FrameStatus::kLost;
     return lost;
@@ -243,11 +249,7 @@ TEST(VisualSlam, ALowResolutionImageGetsAGridItsSizeCanHold) {
     VisualSlamOptions options;
     options.frontend.min_cells_across = min_cells_across;
     options.system.seed = options.system.tracker.seed = 1;
-    VisualSlam vs(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
-    Reports reports;
-    const int frames = static_cast<int>(scene.seq.cam_from_world.size());
-    for (int i = 0; i < frames; ++i) Keep(vs.Process(scene.Frame(i), i, i / kFps), &reports);
-    for (const slam::FrameReport& r : vs.Finish()) reports[r.index] = r;
+    const Reports reports = RunWhole(scene, options);
     int n = 0;
     for (const auto& [i, r] : reports) n += r.status == slam::FrameStatus::kTracked;
     return n;
@@ -281,11 +283,7 @@ TEST(VisualSlam, AWeakPoseInAPureTurnIsTakenAsTheTurn) {
   auto run = [&](bool over_weak_pose) {
     VisualSlamOptions options;
     options.system.rotation_only_over_weak_pose = over_weak_pose;
-    VisualSlam vs(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
-    Reports reports;
-    const int frames = static_cast<int>(scene.seq.cam_from_world.size());
-    for (int i = 0; i < frames; ++i) Keep(vs.Process(scene.Frame(i), i, i / kFps), &reports);
-    for (const slam::FrameReport& r : vs.Finish()) reports[r.index] = r;
+    const Reports reports = RunWhole(scene, options);
     Outcome o;
     for (const auto& [i, r] : reports) o.turns += r.rotation_only && i >= 180 && i <= 203;
     double sum_sq = 0;
