@@ -1,6 +1,7 @@
 #include "frontend/frontend_impl.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace mcslam::frontend {
 
@@ -34,7 +35,9 @@ std::optional<DescriptorMatch> MatchDescriptor(const Descriptor& query, std::spa
 
 DetectionGrid GridFor(const FrontendOptions& o, int width, int height) {
   DetectionGrid g;
-  g.cell_px = std::clamp(std::min(width, height) / std::max(o.min_cells_across, 1), 4, o.cell_size_px);
+  const double area_px = static_cast<double>(width) * static_cast<double>(height);
+  const double cell = std::floor(std::sqrt(area_px / std::max(o.min_cells, 1)));
+  g.cell_px = static_cast<int>(std::clamp(cell, 4.0, static_cast<double>(o.cell_size_px)));
   g.min_distance_px = o.min_distance_px * g.cell_px / o.cell_size_px;
   return g;
 }
@@ -43,7 +46,7 @@ void FrontendOptions::Check() const {
   auto fail = [](const std::string& what) { throw std::invalid_argument("FrontendOptions." + what); };
   if (max_features < 1) fail(fmt::format("max_features must be >= 1 (got {})", max_features));
   if (cell_size_px < 4) fail(fmt::format("cell_size_px must be >= 4 (got {})", cell_size_px));
-  if (min_cells_across < 1) fail(fmt::format("min_cells_across must be >= 1 (got {})", min_cells_across));
+  if (min_cells < 1) fail(fmt::format("min_cells must be >= 1 (got {})", min_cells));
   if (max_new_per_cell < 1) fail(fmt::format("max_new_per_cell must be >= 1 (got {})", max_new_per_cell));
   if (!(quality_level > 0 && quality_level < 1))
     fail(fmt::format("quality_level must be in (0, 1) (got {})", quality_level));

@@ -37,11 +37,12 @@ struct FrontendOptions {
   int max_new_per_cell = 2;     // new corners added to one empty cell in one frame
   double quality_level = 0.01;  // a corner's min eigenvalue must reach this fraction of the frame's largest
   double min_distance_px = 10;  // between new corners, and from a new corner to any tracked feature
-  // The grid holds at least min_cells_across cells along the image's shorter side: below 240 px (the paper's
-  // 320x240 with 40 px cells) the cells, and min_distance_px with them, shrink in proportion (GridFor). A fixed
-  // 40 px grid left a 160x120 image 12 cells, and the paper scenario there 2.2 % of its path off (0.17 % at
-  // 320x240), the rotation scenario lost for 76 frames, a car's 310x94 images lost from frame 36 on.
-  int min_cells_across = 6;
+  // The grid holds at least min_cells cells: in an image smaller than 48 cells of 40 px (the paper's 320x240)
+  // the cells, and min_distance_px with them, shrink in proportion (GridFor); 320x240 and every larger image
+  // keep the 40 px. A fixed 40 px grid left a 160x120 image 12 cells, and the paper scenario there 2.2 % of
+  // its path off (0.17 % at 320x240), the rotation scenario lost for 76 frames, a car's 310x94 images lost from
+  // frame 36 on.
+  int min_cells = 48;
   int block_size = 3;           // structure tensor window (px)
   int border_px = 12;           // no corner nearer than this to the image edge
   // ---- tracking (pyramidal Lucas-Kanade) ----------------------------------------------------------------

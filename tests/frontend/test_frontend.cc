@@ -152,21 +152,21 @@ TEST(Frontend, TracksAKnownSubpixelShift) {
   EXPECT_LT(worst, 0.25);
 }
 
-// The grid keeps its 40 px cells on images whose shorter side is 240 px or more (the paper's 320x240, VGA,
-// KITTI's 1241x376) and shrinks below, min_distance_px with it: at least min_cells_across (6) cells across.
-TEST(Frontend, TheDetectionGridShrinksOnlyBelowTheShorterSidesSixCells) {
+// The grid keeps its 40 px cells on images of 48 such cells or more (the paper's 320x240, the forward
+// scenario's 620x188, VGA, KITTI's 1241x376) and shrinks below, min_distance_px with it.
+TEST(Frontend, TheDetectionGridShrinksOnlyInImagesSmallerThan48Cells) {
   const FrontendOptions o;
-  const std::pair<int, int> unchanged[] = {{320, 240}, {640, 480}, {1241, 376}, {752, 480}};
+  const std::pair<int, int> unchanged[] = {{320, 240}, {620, 188}, {640, 480}, {1241, 376}, {752, 480}};
   for (const auto& [w, h] : unchanged) {
     EXPECT_EQ(GridFor(o, w, h).cell_px, 40) << w << "x" << h;
     EXPECT_EQ(GridFor(o, w, h).min_distance_px, 10.0) << w << "x" << h;
   }
-  EXPECT_EQ(GridFor(o, 160, 120).cell_px, 20);
+  EXPECT_EQ(GridFor(o, 160, 120).cell_px, 20);  // sqrt(160 * 120 / 48)
   EXPECT_EQ(GridFor(o, 160, 120).min_distance_px, 5.0);
-  EXPECT_EQ(GridFor(o, 310, 94).cell_px, 15);  // a car's camera at half resolution: 94 / 6
+  EXPECT_EQ(GridFor(o, 310, 94).cell_px, 24);  // the forward scenario at half resolution: floor(24.6)
   EXPECT_EQ(GridFor(o, 16, 12).cell_px, 4);    // never under 4 px (FrontendOptions::Check's least cell)
   FrontendOptions fixed;
-  fixed.min_cells_across = 1;  // the fixed grid of before
+  fixed.min_cells = 1;  // the fixed grid of before
   EXPECT_EQ(GridFor(fixed, 160, 120).cell_px, 40);
 }
 

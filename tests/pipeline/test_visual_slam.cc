@@ -236,7 +236,7 @@ TEST(VisualSlam, ALowTextureSceneInitialisesFromTheFewCornersItHas) {
   EXPECT_GE(started_low, started_high + 2);
 }
 
-// FrontendOptions::min_cells_across. The fast scenario rendered at half the paper's resolution (160x120, f = 250
+// FrontendOptions::min_cells. The fast scenario rendered at half the paper's resolution (160x120, f = 250
 // px): a fixed grid of 40 px cells is 4 x 3 cells there, two new corners each at most in a frame, too few to
 // follow a camera that moves 15x the paper's speed. The grid shrinks with the image instead (20 px cells).
 // Measured (2 cores, 2026-11-28): seed 1 tracked 150 of 150 frames with the grid that shrinks, 12 with the fixed
@@ -245,16 +245,16 @@ TEST(VisualSlam, ALowTextureSceneInitialisesFromTheFewCornersItHas) {
 TEST(VisualSlam, ALowResolutionImageGetsAGridItsSizeCanHold) {
   const Scene scene("fast", 1, 0.5);
   ASSERT_EQ(scene.seq.camera.height, 120);
-  auto tracked = [&](int min_cells_across) {
+  auto tracked = [&](int min_cells) {
     VisualSlamOptions options;
-    options.frontend.min_cells_across = min_cells_across;
+    options.frontend.min_cells = min_cells;
     options.system.seed = options.system.tracker.seed = 1;
     const Reports reports = RunWhole(scene, options);
     int n = 0;
     for (const auto& [i, r] : reports) n += r.status == slam::FrameStatus::kTracked;
     return n;
   };
-  const int shrinking = tracked(frontend::FrontendOptions{}.min_cells_across), fixed = tracked(1);
+  const int shrinking = tracked(frontend::FrontendOptions{}.min_cells), fixed = tracked(1);
   std::printf("[ low res  ] fast seed 1 at 160x120: %d of 150 frames tracked with the grid that shrinks, %d with "
               "40 px cells\n", shrinking, fixed);
   EXPECT_GE(shrinking, 143);
