@@ -122,20 +122,28 @@ nlohmann::json ReadOptionsReport(const std::string& path, bool known_map) {
   return j;
 }
 
+// Options from --options-from: the report's part (`from_report`) with every option where the flags (`given`)
+// differ from their `defaults` on top, then `check`ed; a bad report or result names the file.
+template <typename Options, typename CheckFn>
+Options OverlayReport(const RunArgs& a, const nlohmann::json& from_report, const Options& defaults, const Options& given,
+                      CheckFn check) {
+  Options out = defaults;
+  try {
+    FromJson(OverlayChanges(from_report, ToJson(defaults), ToJson(given)), &out);
+    check(out);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
+  }
+  return out;
+}
+
 // The run's System options: the flags', or with --options-from the earlier run's with the flags that change an
 // option from its default on top.
 slam::SystemOptions SystemOptionsFor(const RunArgs& a, const nlohmann::json* report) {
   const slam::SystemOptions given = ResolveSystemOptions(a);
   if (!report) return given;
-  const slam::SystemOptions defaults = ResolveSystemOptions(RunArgs{});
-  slam::SystemOptions out = defaults;
-  try {
-    FromJson(OverlayChanges((*report)["options"]["system"], ToJson(defaults), ToJson(given)), &out);
-    out.Check();
-  } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
-  }
-  return out;
+  return OverlayReport(a, (*report)["options"]["system"], ResolveSystemOptions(RunArgs{}), given,
+                       [](const slam::SystemOptions& o) { o.Check(); });
 }
 
 // The known-map tracker's options: the flags', or with --options-from the earlier known-map run's with the flags
@@ -150,16 +158,11 @@ slam::KnownMapOptions KnownMapOptionsFor(const RunArgs& a, const nlohmann::json*
   };
   const slam::KnownMapOptions given = resolve(a);
   if (!report) return given;
-  const slam::KnownMapOptions defaults = resolve(RunArgs{});
-  slam::KnownMapOptions out = defaults;
-  try {
-    FromJson(OverlayChanges((*report)["options"]["known_map"], ToJson(defaults), ToJson(given)), &out);
-    out.tracker.Check();
-    out.smoother.Check();
-  } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
-  }
-  return out;
+  return OverlayReport(a, (*report)["options"]["known_map"], resolve(RunArgs{}), given,
+                       [](const slam::KnownMapOptions& o) {
+                         o.tracker.Check();
+                         o.smoother.Check();
+                       });
 }
 
 // The image job's options: the flags', or with --options-from the earlier run's front end and relocalisation with
@@ -169,16 +172,9 @@ ImageJobOptions ImageOptionsFor(const RunArgs& a, const nlohmann::json* report) 
   image.gt_scale = a.gt_scale;
   if (!report) return image;
   const ImageJobOptions defaults;
-  if ((*report)["options"].contains("frontend")) {
-    frontend::FrontendOptions fe = defaults.frontend;
-    try {
-      FromJson(OverlayChanges((*report)["options"]["frontend"], ToJson(defaults.frontend), ToJson(image.frontend)),
-               &fe);
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(fmt::format("--options-from {}: {}", a.options_from, e.what()));
-    }
-    image.frontend = fe;
-  }
+  if ((*report)["options"].contains("frontend"))
+    image.frontend = OverlayReport(a, (*report)["options"]["frontend"], defaults.frontend, image.frontend,
+                                   [](const frontend::FrontendOptions&) {});  // checked where the job starts
   const nlohmann::json reloc = report->value("relocalisation", nlohmann::json::object());
   if (image.relocalise == defaults.relocalise && reloc.is_object() && reloc.contains("enabled") &&
       reloc["enabled"].is_boolean())

@@ -21,15 +21,6 @@ inline constexpr int kDescriptorLength = 128;
 using Descriptor = std::array<float, kDescriptorLength>;
 float DescriptorDistance(const Descriptor& a, const Descriptor& b);  // L2
 
-struct FrontendOptions;
-
-// The detection grid of a W x H image: cell size and the least distance between corners (FrontendOptions).
-struct DetectionGrid {
-  int cell_px = 0;
-  double min_distance_px = 0;
-};
-DetectionGrid GridFor(const FrontendOptions& o, int width, int height);
-
 struct FrontendOptions {
   // ---- detection (Shi-Tomasi) -------------------------------------------------------------------------
   int max_features = 400;       // budget: tracks (re-attached ones included) never outnumber it
@@ -129,6 +120,13 @@ struct FrontendOptions {
   // Throws std::invalid_argument naming the bad field and its value.
   void Check() const;
 };
+
+// The detection grid of a W x H image: cell size and the least distance between corners (FrontendOptions::min_cells).
+struct DetectionGrid {
+  int cell_px = 0;
+  double min_distance_px = 0;
+};
+DetectionGrid GridFor(const FrontendOptions& o, int width, int height);
 
 // The candidate nearest to `query` (L2) when it passes the remapping's tests: within
 // options.remap_max_distance, and nearer than options.remap_ratio times the second nearest (Lowe's test).
