@@ -249,7 +249,9 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   j["initialisation"] = nullptr;
   j["initialisation_rejections"] = nlohmann::json::array();
   j["depth_reversals"] = nlohmann::json::array();
+  j["map_restarts"] = nlohmann::json::array();
   for (const auto& r : res.reports) {
+    if (r.map_restarted) j["map_restarts"].push_back({{"frame", r.index}, {"why", r.note}});
     if (r.init_rejected) j["initialisation_rejections"].push_back({{"frame", r.index}, {"why", r.note}});
     if (r.depth_reversed) j["depth_reversals"].push_back({{"frame", r.index}, {"why", r.note}});
     if (r.initialisation && !r.note.empty() && j["initialisation"].is_null())

@@ -183,6 +183,16 @@ void RegisterSynth(CLI::App& app) {
   cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")
       ->check(FiniteNumber(0.0, false, 255.0, "a number in [0, 255]"))
       ->capture_default_str();
+  cmd->add_option("--exposure-step", args->render_options.exposure_step,
+                  "The rendered camera's exposure steps every 40 frames through 1, F, 1/F (an auto exposure that "
+                  "jumps; 1: fixed)")
+      ->check(FiniteNumber(0.1, false, 10.0, "a number in [0.1, 10]"))
+      ->capture_default_str();
+  cmd->add_option("--blur-sigma", args->render_options.blur_sigma_px,
+                  "Two of every ten rendered frames (the 4th and 5th) are blurred by a Gaussian of this sigma, px "
+                  "(a shake; 0: sharp)")
+      ->check(FiniteNumber(0.0, false, 50.0, "a number in [0, 50]"))
+      ->capture_default_str();
   cmd->callback([args] { RunSynth(*args); });
 }
 

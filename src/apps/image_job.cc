@@ -291,6 +291,11 @@ void ImageRun::RunFrames() {
         progress.Clear(), spdlog::warn("frame {}: {}", r.index, r.note);
         depth_reversals.push_back({{"frame", r.index}, {"why", r.note}});
       }
+      if (r.map_restarted) {
+        progress.Clear(), spdlog::warn("frame {}: {}", r.index, r.note);
+        map_restarts.push_back({{"frame", r.index}, {"why", r.note}});
+      }
+      if (r.map_dropped) init_frame.reset();  // the dropped map's: the new map's initialisation follows
       if (r.initialisation && !r.note.empty() && !init_frame) {
         init_frame = r.index;
         init_note = r.note;
@@ -480,7 +485,7 @@ void ImageRun::WriteTrajectoryMapAndFrames() {
   if (options.format == "kitti")
     io::WriteKitti((out / "trajectory_kitti.txt").string(), traj, (out / "trajectory_kitti_times.txt").string());
   io::PointCloud cloud;
-  for (const slam::MapPoint& p : vslam->system().map().points()) {
+  for (const slam::MapPoint& p : vslam->system().result_map().points()) {
     if (p.state == slam::PointState::kRemoved) continue;
     cloud.points.push_back(p.position_in_world);
     cloud.ids.push_back(p.id);

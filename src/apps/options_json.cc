@@ -46,7 +46,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, stru
                                                 ba_fixed_keyframes, tracker, init, mapping, smoother,
                                                 sigma_trans_floor_rel_depth, seed, relocalise_min_inliers,
                                                 rotation_only, rotation_only_min_tracks, rotation_only_min_ratio,
-                                                rotation_only_over_weak_pose, bridge)
+                                                rotation_only_over_weak_pose, bridge, restart_min_lost_frames)
 }  // namespace mcslam::slam
 
 namespace mcslam::frontend {
@@ -57,8 +57,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(
     FrontendOptions, max_features, cell_size_px, max_new_per_cell, quality_level, min_distance_px, min_cells,
     block_size, border_px, pyramid_levels, retry_pyramid_levels, window_px, jolt_recovery, jolt_min_shift_px,
     jolt_min_failed_fraction, max_iterations, epsilon_px, min_eigen_threshold, max_forward_backward_px,
-    max_patch_error, track_border_px, anchor_every, anchor_patch_px, anchor_min_correlation, anchor_max_shift_px,
-    anchor_mismatch, anchor_auto_reanchor_fraction, anchor_max_scale_change, anchor_min_texture_ratio,
+    max_patch_error, exposure_min_change, track_border_px, anchor_every, anchor_patch_px, anchor_min_correlation, anchor_max_shift_px,
+    anchor_mismatch, anchor_auto_reanchor_fraction, anchor_blur_ratio, anchor_max_scale_change, anchor_min_texture_ratio,
     anchor_max_iterations, anchor_epsilon_px,
     use_kalman_prediction, kalman_accel_sigma_px, kalman_measurement_sigma_px, init_velocity_radius_px,
     descriptor_size_px, describe_async, descriptor_refresh_frames, remap_window_px, remap_max_candidates,

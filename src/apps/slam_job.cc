@@ -35,10 +35,10 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
   put(system.Flush());  // MappingOptions::local_ba_async: the last keyframe's revised report
   res.reports = std::move(log.reports);
   res.times = clock.Elapsed();
-  res.initialised = system.initialised();
+  res.initialised = system.made_a_map();
   res.self_calibration = system.self_calibration();
   res.self_calibration_camera = system.camera();
-  for (const slam::MapPoint& p : system.map().points()) {
+  for (const slam::MapPoint& p : system.result_map().points()) {
     if (p.state == slam::PointState::kRemoved) continue;
     res.map.points.push_back(p.position_in_world);
     res.map.ids.push_back(p.id);

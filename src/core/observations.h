@@ -24,6 +24,9 @@ struct FrameObservations {
   // cam_from_world found by relocalisation (System::Relocalise) for this frame: the pose step searches
   // around it instead of around the last pose.
   std::optional<Pose> pose_hint;
+  // The front end measured the frame as blurred (frontend::FrameStats::blurred: its patches less sharp than
+  // their birth patches): its features lie less precisely, and the System does not initialise on it.
+  bool blurred = false;
 };
 
 }  // namespace mcslam

@@ -76,6 +76,10 @@ void FrontendOptions::Check() const {
     fail(fmt::format("anchor_min_correlation must be in (-1, 1) (got {})", anchor_min_correlation));
   if (!(anchor_max_shift_px > 0) || !std::isfinite(anchor_max_shift_px))
     fail(fmt::format("anchor_max_shift_px must be positive (got {})", anchor_max_shift_px));
+  if (!(exposure_min_change >= 0) || !std::isfinite(exposure_min_change))
+    fail(fmt::format("exposure_min_change must be >= 0 (0: never compensated; got {})", exposure_min_change));
+  if (!(anchor_blur_ratio >= 0 && anchor_blur_ratio <= 1))
+    fail(fmt::format("anchor_blur_ratio must be in [0, 1] (0: no frame counts as blurred; got {})", anchor_blur_ratio));
   if (!(anchor_max_scale_change > 1) || !std::isfinite(anchor_max_scale_change))
     fail(fmt::format("anchor_max_scale_change must be > 1 (got {})", anchor_max_scale_change));
   if (!(anchor_min_texture_ratio >= 0 && anchor_min_texture_ratio < 1))
@@ -196,6 +200,7 @@ void Frontend::Reset() {
   impl_->tracks.clear();
   impl_->prev_pyramid.clear();
   impl_->size = cv::Size();
+  impl_->blurred_run = 0;
 }
 
 size_t Frontend::NumTracks() const { return impl_->tracks.size(); }

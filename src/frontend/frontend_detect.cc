@@ -40,7 +40,9 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     }
   }
 
-  const int budget = o.max_features - static_cast<int>(tracks.size());
+  // A blurred frame (FrameStats::blurred) takes no new corner: its corners lie off where the sharp frames after it
+  // see them, and their birth patches would be blurred templates.
+  const int budget = st.blurred ? 0 : o.max_features - static_cast<int>(tracks.size());
   bool any_empty_cell = false;
   for (int c : occupancy) any_empty_cell |= c == 0;
   if ((budget <= 0 || !any_empty_cell) && requests.empty()) {  // no new corner: every deferred request waits

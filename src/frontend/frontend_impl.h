@@ -94,11 +94,13 @@ enum class AnchorOutcome : uint8_t { kNotAligned, kKept, kReanchor, kMismatch };
 // Aligns a track's birth patch with `gray` from `uv` (where LK put it). On success writes the aligned centre
 // and the warp's linear part.
 inline AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, const cv::Point2f& uv,
-                              const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear) {
+                              const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear,
+                              float* sharpness_ratio) {
   const AffinePatch::Result r =
       anchor.Align(gray, uv, *linear, o.anchor_max_iterations, static_cast<float>(o.anchor_epsilon_px));
   // Too near the edge to align: the track keeps its LK position this frame.
   if (!r.inside) return AnchorOutcome::kNotAligned;
+  *sharpness_ratio = anchor.sharpness() > 0 ? r.sharpness / anchor.sharpness() : 0.0f;
   // A mirrored warp (negative determinant) is no view of the same surface.
   if (r.left_image || !(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px) ||
       !(cv::determinant(r.linear) > 0))
@@ -146,6 +148,7 @@ struct Frontend::Impl {
   int64_t next_id = 0;
   cv::Size size;  // of the frames since the last Reset; empty before the first
   std::vector<cv::Mat> prev_pyramid;
+  int blurred_run = 0;  // frames in a row whose patches were less sharp than their birth patches (TrackFeatures)
 
   // Description of the tracks born in the last frame (indices into `tracks`, which does not change until
   // the task is joined).

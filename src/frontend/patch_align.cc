@@ -7,6 +7,21 @@
 
 namespace mcslam::frontend {
 
+float PatchSharpness(const float* v, int side) {
+  double sum = 0, sum2 = 0, grad = 0;
+  const int n = side * side;
+  for (int k = 0; k < n; ++k) sum += v[k], sum2 += static_cast<double>(v[k]) * v[k];
+  for (int y = 1; y + 1 < side; ++y)
+    for (int x = 1; x + 1 < side; ++x) {
+      const double gx = 0.5 * (v[y * side + x + 1] - v[y * side + x - 1]);
+      const double gy = 0.5 * (v[(y + 1) * side + x] - v[(y - 1) * side + x]);
+      grad += gx * gx + gy * gy;
+    }
+  const double variance = sum2 / n - (sum / n) * (sum / n);
+  const int interior = (side - 2) * (side - 2);
+  return variance > 1e-9 && interior > 0 ? static_cast<float>(grad / interior / variance) : 0.0f;
+}
+
 AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int side) {
   CV_Assert(gray.type() == CV_8UC1 && side >= 3 && side % 2 == 1);
   const float h = static_cast<float>(side - 1) / 2.0f;
@@ -26,6 +41,7 @@ AffinePatch::AffinePatch(const cv::Mat& gray, const cv::Point2f& centre, int sid
       values[static_cast<size_t>(y * side + x)] = v;
       sum += v;
     }
+  sharpness_ = PatchSharpness(values.data(), side);
   const float mean = static_cast<float>(sum / n);
   double norm2 = 0, sxx = 0, sxy = 0, syy = 0;
   for (int y = 0; y < side; ++y)
@@ -191,6 +207,8 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
       max_iterations = it + 1;
     }
   }
+  // The samples of the last pass are those at r's warp.
+  if (r.inside) r.sharpness = PatchSharpness(sampled.data(), side_);
   return r;
 }
 

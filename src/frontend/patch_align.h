@@ -13,6 +13,10 @@
 
 namespace mcslam::frontend {
 
+// Mean squared central-difference gradient over the interior of a side x side patch (row-major), divided by
+// the patch's intensity variance: invariant to gain and bias, lowered by blur. 0 for a flat patch.
+float PatchSharpness(const float* values, int side);
+
 class AffinePatch {
  public:
   AffinePatch() = default;
@@ -24,6 +28,9 @@ class AffinePatch {
   // gradients): near 0 for a patch that only holds an edge, whose alignment can slide along it; 0 when empty.
   float texture_ratio() const { return texture_ratio_; }
   int side() const { return side_; }
+  // How sharp the patch is, whatever its gain and bias: the mean squared intensity gradient over the intensity
+  // variance (PatchSharpness). Blur lowers it; a brighter or darker view of the same patch does not.
+  float sharpness() const { return sharpness_; }
 
   struct Result {
     bool inside = false;      // false: the patch does not fit in the image at the start; nothing else is set
@@ -33,6 +40,7 @@ class AffinePatch {
     cv::Point2f centre;       // where the patch's centre lands in the image
     cv::Matx22f linear;       // image offset = linear * patch offset (from the patch's centre)
     int iterations = 0;
+    float sharpness = 0;      // the sampled patch's sharpness() at the final warp
   };
   // Aligns with `gray` starting from (centre, linear); stops when an update moves the patch's corners by less
   // than `epsilon_px`, or after `max_iterations`. `gray` is 8-bit or float (CV_32FC1): the same pixel values give
@@ -46,6 +54,7 @@ class AffinePatch {
   std::vector<float> values_;                   // template intensities minus their mean
   float norm_ = 0;                              // their L2 norm
   float texture_ratio_ = 0;
+  float sharpness_ = 0;
   // Steepest-descent images, one array of side * side per warp parameter (contiguous: an iteration's sums
   // over the pixels run as vector loops), and their dot products with the template (~0: they are made
   // orthogonal to it; kept so that an iteration's step is the same sum as with the template subtracted).

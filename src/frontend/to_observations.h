@@ -9,6 +9,7 @@ inline FrameObservations ToObservations(const FrameResult& result) {
   FrameObservations out;
   out.index = result.index;
   out.stamp_s = result.stamp_s;
+  out.blurred = result.stats.blurred;
   out.features.reserve(result.features.size());
   for (const TrackedFeature& f : result.features) out.features.push_back({f.feature_id, f.uv_px});
   return out;

@@ -243,6 +243,16 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   const auto t_backend = Clock::now();
   step.reports = system_.Process(obs);
   step.backend_ms = MsSince(t_backend);
+  if (system_.restarts() != restarts_seen_) {  // the map was dropped: what was kept of its points goes with it
+    restarts_seen_ = system_.restarts();
+    lost_descriptors_.clear();
+    first_descriptors_.clear();
+    remap_tries_.clear();
+    late_requested_.clear();
+    late_tries_ = late_found_ = 0;
+    latest_cam_from_world_.reset();
+    latest_inliers_ = 0;
+  }
   // Tracks the System took as older map points (a place seen again): they go on under the points' ids, with
   // their own descriptors (this view's).
   for (const auto& [track, point] : system_.merged_tracks())

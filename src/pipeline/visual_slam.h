@@ -156,6 +156,7 @@ class VisualSlam {
   std::unordered_set<int64_t> late_requested_;
   int64_t frames_processed_ = 0;  // Process and SkipFrame calls: remap_tries_' clock
   bool was_lost_ = false;
+  int restarts_seen_ = 0;  // System::restarts() after the last Process
   bool after_gap_ = false;  // frames were skipped since the last one processed
 };
 

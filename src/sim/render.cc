@@ -20,6 +20,26 @@ void RenderOptions::Check() const {
   if (supersample < 1 || supersample > 8)
     throw std::invalid_argument(fmt::format("render: supersample must be in [1, 8], got {}", supersample));
   if (!(image_noise >= 0)) throw std::invalid_argument(fmt::format("render: image_noise must be >= 0, got {}", image_noise));
+  if (!(exposure_step > 0) || !std::isfinite(exposure_step))
+    throw std::invalid_argument(fmt::format("render: exposure_step must be positive, got {}", exposure_step));
+  if (exposure_period < 1)
+    throw std::invalid_argument(fmt::format("render: exposure_period must be >= 1, got {}", exposure_period));
+  if (!(blur_sigma_px >= 0) || !std::isfinite(blur_sigma_px))
+    throw std::invalid_argument(fmt::format("render: blur_sigma_px must be >= 0, got {}", blur_sigma_px));
+  if (blur_every < 5) throw std::invalid_argument(fmt::format("render: blur_every must be >= 5, got {}", blur_every));
+}
+
+double RenderOptions::Exposure(uint64_t index) const {
+  switch ((index / static_cast<uint64_t>(exposure_period)) % 3) {
+    case 1: return exposure_step;
+    case 2: return 1.0 / exposure_step;
+    default: return 1.0;
+  }
+}
+
+bool RenderOptions::Blurred(uint64_t index) const {
+  const uint64_t k = index % static_cast<uint64_t>(blur_every);
+  return blur_sigma_px > 0 && (k == 3 || k == 4);
 }
 
 namespace {
@@ -242,6 +262,9 @@ cv::Mat SceneRenderer::Render(const PinholeCamera& camera, const Pose& cam_from_
     }
   });
 
+  if (options_.Blurred(frame_index)) cv::GaussianBlur(shade, shade, cv::Size(), options_.blur_sigma_px);
+  const double exposure = options_.Exposure(frame_index);
+  if (exposure != 1.0) shade *= exposure;
   cv::Mat img(camera.height, camera.width, CV_8U);
   CounterRng noise(options_.seed ^ 0x5eedULL, static_cast<uint32_t>(200 + frame_index));
   for (int y = 0; y < camera.height; ++y) {

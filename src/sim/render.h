@@ -19,6 +19,19 @@ struct RenderOptions {
   int supersample = 2;          // rays per pixel along each axis (anti-aliasing)
   double image_noise = 1.0;     // Gaussian noise added to the 8-bit image, grey levels (sensor-like), >= 0
   uint64_t seed = 1;            // textures and noise
+  // A camera's own photometry, for the front end's tests against it (docs/robustness_photometric.md):
+  // - its exposure steps every exposure_period frames through the cycle 1, exposure_step, 1 / exposure_step (an
+  //   auto exposure that jumps; the light is scaled before the noise and the 8-bit clip, so a brighter frame
+  //   saturates); 1: fixed;
+  // - frames blur_every * k + 3 and + 4 (two of every blur_every from the fourth) are blurred by a Gaussian of
+  //   blur_sigma_px (a shake, a refocus); 0: sharp.
+  double exposure_step = 1.0;
+  int exposure_period = 40;
+  double blur_sigma_px = 0.0;
+  int blur_every = 10;
+  // The exposure frame `index` is rendered with, and whether it is blurred.
+  double Exposure(uint64_t index) const;
+  bool Blurred(uint64_t index) const;
   void Check() const;           // throws std::invalid_argument naming the bad field
 };
 

@@ -40,6 +40,7 @@ struct FrameRecord {
   bool has_pose = false;
   Pose cam_from_world;
   int pose_inliers = 0;  // the map points that agreed with the pose step's pose (0: posed otherwise)
+  bool blurred = false;  // FrameObservations::blurred
 
   const FeatureUndistorted* Find(int64_t id) const {
     auto it = LowerBound(id);

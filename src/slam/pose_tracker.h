@@ -128,6 +128,8 @@ class PoseTracker {
 
   const PoseTrackerOptions& options() const { return options_; }
   compute::PoseKernel& kernel() { return *kernel_; }
+  // Hands the kernel back (a System that starts again builds a new tracker with it); the tracker is unusable after.
+  std::unique_ptr<compute::PoseKernel> ReleaseKernel() { return std::move(kernel_); }
 
  private:
   // One Monte Carlo scoring about prev (pivot m, rotation spread sigma_rot_deg, est->sigma_t): the best

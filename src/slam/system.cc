@@ -122,6 +122,8 @@ void SystemOptions::Check() const {
     Fail(fmt::format("rotation_only_min_tracks must be >= 3, got {}", rotation_only_min_tracks));
   if (!(rotation_only_min_ratio > 0 && rotation_only_min_ratio <= 1))
     Fail(fmt::format("rotation_only_min_ratio must be in (0, 1], got {}", rotation_only_min_ratio));
+  if (restart_min_lost_frames < 0)
+    Fail(fmt::format("restart_min_lost_frames must be >= 0 (0: never), got {}", restart_min_lost_frames));
   if (relocalise_min_inliers < 6)
     Fail(fmt::format("relocalise_min_inliers must be >= 6, got {}", relocalise_min_inliers));
   tracker.Check();
@@ -147,7 +149,10 @@ System::System(const PinholeCamera& camera, const SystemOptions& options,
   // The pose step (§5) exists from the start; its translation floor is set when the map's scale is known.
   tracker_ = std::make_unique<PoseTracker>(ideal_, options_.tracker, std::move(pose_kernel));
   point_normals_ = compute::NormalTable(options_.mapping.samples, options_.seed, /*stream=*/2);
+  given_camera_ = camera_;
 }
+
+System& System::operator=(System&& other) noexcept = default;
 
 System::~System() {
   if (pending_ba_ && pending_ba_->solved.valid()) pending_ba_->solved.wait();  // its thread reads *pending_ba_
@@ -190,8 +195,68 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   if (pending_ba_)
     for (const FrameReport& r : now)
       if (r.index == frame.index) pending_ba_->report = r;
+  now = MaybeRestart(frame, std::move(now));
+  // A new map after a restart: the dropped map's frames lose their poses now, before the new map's reports.
+  if (!dropped_reports_.empty() &&
+      std::any_of(now.begin(), now.end(), [](const FrameReport& r) { return r.initialisation; })) {
+    std::vector<FrameReport> dropped = std::exchange(dropped_reports_, {});
+    dropped_map_.reset();
+    out.insert(out.end(), std::make_move_iterator(dropped.begin()), std::make_move_iterator(dropped.end()));
+  }
   out.insert(out.end(), std::make_move_iterator(now.begin()), std::make_move_iterator(now.end()));
   return out;
+}
+
+std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, std::vector<FrameReport> now) {
+  const auto current = std::find_if(now.begin(), now.end(), [&](const FrameReport& r) { return r.index == frame.index; });
+  const bool lost = current != now.end() && current->status == FrameStatus::kLost;
+  lost_run_ = lost ? lost_run_ + 1 : 0;
+  if (!lost || options_.restart_min_lost_frames == 0 || !loaded_points_.empty() || lost_run_ < options_.restart_min_lost_frames)
+    return now;
+  std::vector<int64_t> posed;
+  for (const FrameRecord& f : map_.frames)
+    if (f.has_pose) posed.push_back(f.index);
+  if (lost_run_ <= static_cast<int>(posed.size())) return now;
+  // The dropped map's frames, reported again without a pose. Its pending adjustment is applied first: its thread
+  // reads the map.
+  ApplyPendingAdjustment();
+  held_reports_.clear();
+  // Reported when the new map initialises: until then the dropped map's poses stand (a run that ends first keeps
+  // them).
+  std::vector<FrameReport> out;
+  std::sort(posed.begin(), posed.end());
+  for (int64_t index : posed) {
+    FrameReport r;
+    r.index = index;
+    for (const FrameRecord& f : map_.frames)
+      if (f.index == index) r.stamp_s = f.stamp_s;
+    r.status = FrameStatus::kLost;
+    r.map_dropped = true;
+    r.note = fmt::format("its map was dropped at frame {}: lost for {} frames in a row, more than the {} it posed",
+                         frame.index, lost_run_, posed.size());
+    out.push_back(std::move(r));
+  }
+  const std::string why = fmt::format("lost for {} frames in a row, more than the {} frames the map posed ({}-{}): a "
+                                      "new map is started, and that one dropped when the new one is initialised",
+                                      lost_run_, posed.size(), posed.front(), posed.back());
+  // A new System in this one's place, with its kernels, camera as given, options and baseline oracle.
+  std::unique_ptr<compute::PoseKernel> pose_kernel = tracker_->ReleaseKernel();
+  std::unique_ptr<compute::PointKernel> point_kernel = std::move(point_kernel_);
+  auto oracle = std::move(oracle_);
+  Map dropped_map = std::move(map_);
+  const int restarts = restarts_ + 1;
+  *this = System(given_camera_, options_, std::move(pose_kernel), std::move(point_kernel));
+  oracle_ = std::move(oracle);
+  restarts_ = restarts;
+  dropped_reports_ = std::move(out);
+  dropped_map_ = std::move(dropped_map);
+  std::vector<FrameReport> again = ProcessFrame(frame);
+  for (FrameReport& r : again)
+    if (r.index == frame.index) {
+      r.map_restarted = true;
+      r.note = why + (r.note.empty() ? "" : "; " + r.note);
+    }
+  return again;
 }
 
 void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes,
@@ -229,6 +294,7 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
   FrameRecord rec;
   rec.index = frame.index;
   rec.stamp_s = frame.stamp_s;
+  rec.blurred = frame.blurred;
   rec.features.reserve(frame.features.size());
   size_t aliased = 0;
   for (const FeatureObservation& f : frame.features) {

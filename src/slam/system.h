@@ -240,6 +240,15 @@ struct SystemOptions {
   // becomes part of the map. A provisional map whose tracking fails first leaves the map (its frames keep their
   // poses). docs/rotation_only.md.
   bool bridge = true;
+  // A map that stays lost (the camera went where no relocalisation finds it, right after a weak initialisation,
+  // or after a long blackout) is replaced by a new one initialised from the frames that follow, once the frames
+  // lost in a row reach restart_min_lost_frames and outnumber the frames the map posed: the run then keeps the
+  // larger share of its frames posed, in one map. When the new map initialises, the old one's frames are reported
+  // again without a pose (FrameReport::map_dropped); a run that ends before keeps them. A map read from a file is
+  // never replaced. 0: never. (The rendered fast scenario
+  // with two of every ten frames blurred, seed 1, initialised on frames 1-3 and was lost from frame 4 to its
+  // end, 146 of 150 frames.)
+  int restart_min_lost_frames = 10;
   void Check() const;
 };
 
@@ -303,6 +312,11 @@ struct FrameReport {
   // The map was found, while it settled, to be the mirror of the scene in depth and was flipped (note says by
   // how much the mirror explained the settling window better).
   bool depth_reversed = false;
+  // A revised report: the frame had been posed in a map that was dropped (SystemOptions::restart_min_lost_frames);
+  // it has no pose now (returned when the new map initialises). The report of the frame that started the new map
+  // says so in its note, with map_restarted set.
+  bool map_dropped = false;
+  bool map_restarted = false;
 };
 
 // The System's bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is
@@ -331,6 +345,7 @@ struct SelfCalibration {
 class System {
  public:
   ~System();  // waits for a local bundle adjustment still being solved (MappingOptions::local_ba_async)
+  System& operator=(System&& other) noexcept;  // (a restart: SystemOptions::restart_min_lost_frames)
   System(const PinholeCamera& camera, const SystemOptions& options, std::unique_ptr<compute::PoseKernel> pose_kernel,
          std::unique_ptr<compute::PointKernel> point_kernel);
 
@@ -365,6 +380,12 @@ class System {
   void StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes,
                   const std::optional<PinholeCamera>& camera = std::nullopt);
   bool initialised() const { return initialised_; }
+  // Some map was initialised in this run: this one, or one dropped since (SystemOptions::restart_min_lost_frames),
+  // whose frames keep their poses until a new map initialises.
+  bool made_a_map() const { return initialised_ || restarts_ > 0; }
+  // The map a run's outputs hold (map.ply): this one, or while a new map waits for its initialisation after a
+  // restart, the dropped one, whose frames keep their poses until then.
+  const Map& result_map() const { return !initialised_ && dropped_map_ ? *dropped_map_ : map_; }
   // Some frame has a pose: false before the initialisation, and in a loaded map before its first relocalisation.
   bool localised() const { return last_posed_slot_ >= 0; }
   // A provisional map is being tracked (SystemOptions::bridge): the caller should try to relocalise every frame
@@ -382,6 +403,8 @@ class System {
   // The camera the map is made with: the given one, or with its k1 self-calibrated (InitOptions::self_calibrate).
   const PinholeCamera& camera() const { return camera_; }
   const SelfCalibration& self_calibration() const { return self_calibration_; }
+  // How many times the map was dropped and started again (SystemOptions::restart_min_lost_frames).
+  int restarts() const { return restarts_; }
 
  private:
   bool TryInitialise(std::vector<FrameReport>* out);
@@ -562,6 +585,16 @@ class System {
   std::unordered_map<int64_t, int64_t> track_alias_;
   std::vector<std::pair<int64_t, int64_t>> merged_tracks_;
   std::vector<FrameReport> held_reports_;  // revised, not yet returned (ApplyPendingAdjustment, a Process that threw)
+  // Restarts (SystemOptions::restart_min_lost_frames): the camera as given (before any self-calibration), the
+  // frames lost in a row, and the restarts so far.
+  PinholeCamera given_camera_;
+  int lost_run_ = 0;
+  int restarts_ = 0;
+  std::vector<FrameReport> dropped_reports_;  // the dropped map's frames, returned when the new map initialises
+  std::optional<Map> dropped_map_;             // ... and the dropped map, kept until then (result_map)
+  // After this frame's reports: drops the map and starts again with this frame when it has stayed lost long
+  // enough; returns the reports to return instead (the dropped frames', then this frame's in the new start).
+  std::vector<FrameReport> MaybeRestart(const FrameObservations& frame, std::vector<FrameReport> now);
   // After a turn ended in a move at `slot`: a bridge anchored at the turn's last pure-rotation frame; false (and no bridge)
   // when the map's depth before the turn cannot be measured.
   bool StartBridge(int slot);

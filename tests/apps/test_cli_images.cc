@@ -279,9 +279,11 @@ TEST(CliImages, CorruptFrameIsSkippedAndCounted) {
   ASSERT_LT(row, static_cast<long>(status.size()));
   auto cell = [&](const std::string& name) { return testing::CsvColumn(out + "/frames.csv", name).at(row); };
   EXPECT_EQ(cell("index"), "20");
-  for (const char* zero : {"keyframe", "map_points", "guessed_scale", "features", "fe_anchor_shift_px", "fe_jolt_recovered"})
+  for (const char* zero : {"keyframe", "map_points", "guessed_scale", "features", "fe_anchor_shift_px", "fe_jolt_recovered",
+                           "fe_blurred"})
     EXPECT_EQ(cell(zero), "0") << zero;
-  for (const char* empty : {"reproj_mean_px", "track_ms", "trans_err_m", "sigma_tz", "backend_ms", "fe_total_ms"})
+  for (const char* empty : {"reproj_mean_px", "track_ms", "trans_err_m", "sigma_tz", "backend_ms", "fe_total_ms",
+                            "fe_sharpness", "fe_exposure_gain"})
     EXPECT_EQ(cell(empty), "") << empty;
   EXPECT_GT(std::stod(cell("decode_ms")), 0.0);
   EXPECT_NE(cell("note").find("frame_0020.png"), std::string::npos) << cell("note");
