@@ -295,7 +295,6 @@ void ImageRun::RunFrames() {
         progress.Clear(), spdlog::warn("frame {}: {}", r.index, r.note);
         map_restarts.push_back({{"frame", r.index}, {"why", r.note}});
       }
-      if (r.map_dropped) init_frame.reset();  // the dropped map's: the new map's initialisation follows
       if (r.initialisation && !r.note.empty() && !init_frame) {
         init_frame = r.index;
         init_note = r.note;
@@ -399,6 +398,16 @@ void ImageRun::RunFrames() {
     if (failure.empty()) failure = e.what();
   }
   times = clock.Elapsed();
+  // The initialisation of the map whose frames the run kept (a restart may have replaced the first one).
+  if (!map_restarts.empty()) {
+    init_frame.reset();
+    for (const slam::FrameReport& r : reports)
+      if (r.initialisation && !r.note.empty() && r.has_pose) {
+        init_frame = r.index;
+        init_note = r.note;
+        break;
+      }
+  }
   const double wall_s = times.wall_s;
   progress.Update(frames_processed, rows.empty() ? 0 : rows.back().index, tracked, lost, vslam->system().map().points().size(),
                   frames_processed / std::max(wall_s, 1e-9), true);

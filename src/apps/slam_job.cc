@@ -32,7 +32,7 @@ SlamRunResult RunSlam(const SequenceInput& input, const slam::SystemOptions& opt
     if (stop && stop()) break;
     put(system.Process(f));
   }
-  put(system.Flush());  // MappingOptions::local_ba_async: the last keyframe's revised report
+  put(system.Finish());  // the last keyframe's revised report (local_ba_async); a restart's outcome
   res.reports = std::move(log.reports);
   res.times = clock.Elapsed();
   res.initialised = system.made_a_map();

@@ -72,7 +72,7 @@ void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
         first_descriptors_.emplace(f.feature_id, *d);
 }
 
-std::vector<slam::FrameReport> VisualSlam::Finish() { return system_.Flush(); }
+std::vector<slam::FrameReport> VisualSlam::Finish() { return system_.Finish(); }
 
 io::MapFile VisualSlam::ExportMap() {
   system_.Flush();  // nothing is pending after Finish; a caller that did not call it loses only the report

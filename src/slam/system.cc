@@ -181,6 +181,31 @@ std::vector<FrameReport> System::Flush() {
   return std::exchange(held_reports_, {});
 }
 
+int System::PosedFrames() const {
+  return static_cast<int>(std::count_if(map_.frames.begin(), map_.frames.end(), [](const FrameRecord& f) { return f.has_pose; }));
+}
+
+std::vector<FrameReport> System::Finish() {
+  std::vector<FrameReport> out = Flush();
+  if (!dropped_map_) return out;
+  // The run ended before the map started after a restart outgrew the one before it: that one's poses stand, and
+  // the new map's frames lose theirs (one map's frames in the trajectory).
+  for (const FrameRecord& f : map_.frames) {
+    if (!f.has_pose) continue;
+    FrameReport r;
+    r.index = f.index;
+    r.stamp_s = f.stamp_s;
+    r.status = FrameStatus::kLost;
+    r.map_dropped = true;
+    r.note = fmt::format("posed in a map started after the map before it stayed lost; the run ended before it posed "
+                         "more frames than the {} of that map, whose poses stand",
+                         dropped_posed_);
+    out.push_back(std::move(r));
+  }
+  finished_with_dropped_map_ = true;
+  return out;
+}
+
 std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   std::vector<FrameReport> out = Flush();
   std::vector<FrameReport> now;
@@ -196,9 +221,9 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
     for (const FrameReport& r : now)
       if (r.index == frame.index) pending_ba_->report = r;
   now = MaybeRestart(frame, std::move(now));
-  // A new map after a restart: the dropped map's frames lose their poses now, before the new map's reports.
-  if (!dropped_reports_.empty() &&
-      std::any_of(now.begin(), now.end(), [](const FrameReport& r) { return r.initialisation; })) {
+  // A new map after a restart: once it has posed more frames than the map before it, that map's frames lose their
+  // poses (before the new map's reports of this frame).
+  if (dropped_map_ && PosedFrames() > dropped_posed_) {
     std::vector<FrameReport> dropped = std::exchange(dropped_reports_, {});
     dropped_map_.reset();
     out.insert(out.end(), std::make_move_iterator(dropped.begin()), std::make_move_iterator(dropped.end()));
@@ -221,8 +246,8 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   // reads the map.
   ApplyPendingAdjustment();
   held_reports_.clear();
-  // Reported when the new map initialises: until then the dropped map's poses stand (a run that ends first keeps
-  // them).
+  // Reported once the new map has posed more frames than this one: until then this map's poses stand, and a run
+  // that ends first keeps them (Finish).
   std::vector<FrameReport> out;
   std::sort(posed.begin(), posed.end());
   for (int64_t index : posed) {
@@ -232,12 +257,13 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
       if (f.index == index) r.stamp_s = f.stamp_s;
     r.status = FrameStatus::kLost;
     r.map_dropped = true;
-    r.note = fmt::format("its map was dropped at frame {}: lost for {} frames in a row, more than the {} it posed",
+    r.note = fmt::format("its map was replaced: lost at frame {} for {} frames in a row, more than the {} it posed, "
+                         "and the map started then posed more",
                          frame.index, lost_run_, posed.size());
     out.push_back(std::move(r));
   }
   const std::string why = fmt::format("lost for {} frames in a row, more than the {} frames the map posed ({}-{}): a "
-                                      "new map is started, and that one dropped when the new one is initialised",
+                                      "new map is started, which replaces this one once it has posed more frames",
                                       lost_run_, posed.size(), posed.front(), posed.back());
   // A new System in this one's place, with its kernels, camera as given, options and baseline oracle.
   std::unique_ptr<compute::PoseKernel> pose_kernel = tracker_->ReleaseKernel();
@@ -250,6 +276,7 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   restarts_ = restarts;
   dropped_reports_ = std::move(out);
   dropped_map_ = std::move(dropped_map);
+  dropped_posed_ = static_cast<int>(posed.size());
   std::vector<FrameReport> again = ProcessFrame(frame);
   for (FrameReport& r : again)
     if (r.index == frame.index) {

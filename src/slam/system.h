@@ -357,6 +357,10 @@ class System {
   // that keyframe's revised report (none when nothing is pending; also those a Process that threw had flushed).
   // Process does it first; call it after the last frame, before reading the final map.
   std::vector<FrameReport> Flush();
+  // After the last frame: Flush, and when the map started after a restart (SystemOptions::restart_min_lost_frames)
+  // has not yet posed more frames than the map before it, that map's poses stand and the new map's frames are
+  // reported again without a pose (FrameReport::map_dropped); result_map() is then that map.
+  std::vector<FrameReport> Finish();
   // The same wait and application, the revised report held for the next Process or Flush to return: for a caller
   // that reads the map (relocalisation) before it processes the frame.
   void ApplyPendingAdjustment();
@@ -383,9 +387,9 @@ class System {
   // Some map was initialised in this run: this one, or one dropped since (SystemOptions::restart_min_lost_frames),
   // whose frames keep their poses until a new map initialises.
   bool made_a_map() const { return initialised_ || restarts_ > 0; }
-  // The map a run's outputs hold (map.ply): this one, or while a new map waits for its initialisation after a
-  // restart, the dropped one, whose frames keep their poses until then.
-  const Map& result_map() const { return !initialised_ && dropped_map_ ? *dropped_map_ : map_; }
+  // The map a run's outputs hold (map.ply): this one, or the one before a restart while the new one is not
+  // initialised, and after Finish when it had posed more frames than the new one.
+  const Map& result_map() const { return dropped_map_ && (finished_with_dropped_map_ || !initialised_) ? *dropped_map_ : map_; }
   // Some frame has a pose: false before the initialisation, and in a loaded map before its first relocalisation.
   bool localised() const { return last_posed_slot_ >= 0; }
   // A provisional map is being tracked (SystemOptions::bridge): the caller should try to relocalise every frame
@@ -590,8 +594,13 @@ class System {
   PinholeCamera given_camera_;
   int lost_run_ = 0;
   int restarts_ = 0;
-  std::vector<FrameReport> dropped_reports_;  // the dropped map's frames, returned when the new map initialises
-  std::optional<Map> dropped_map_;             // ... and the dropped map, kept until then (result_map)
+  // A map replaced by a restart: its frames' reports without a pose (returned once the new map has posed more
+  // frames than its dropped_posed_), and the map itself until then (result_map).
+  std::vector<FrameReport> dropped_reports_;
+  std::optional<Map> dropped_map_;
+  int dropped_posed_ = 0;
+  bool finished_with_dropped_map_ = false;  // Finish kept it
+  int PosedFrames() const;
   // After this frame's reports: drops the map and starts again with this frame when it has stayed lost long
   // enough; returns the reports to return instead (the dropped frames', then this frame's in the new start).
   std::vector<FrameReport> MaybeRestart(const FrameObservations& frame, std::vector<FrameReport> now);

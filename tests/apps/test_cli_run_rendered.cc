@@ -255,8 +255,8 @@ TEST(CliRun, AfterAGapTheMapIsFoundAgainAndNoFrameIsTrackedWrong) {
 
 // A blackout (frames 10-29 of the rendered car black: 20 m driven unseen) leaves the car where none of its first
 // map can be relocalised. That map posed frames 0-9; once more frames were lost in a row than it posed, a new map
-// is started (SystemOptions::restart_min_lost_frames), and when that one initialises the first one's frames lose
-// their poses. Measured (scene seeds 1-3): restarted at frame 20, frames 30-119 posed (90), ATE 2.8-13.8 cm over
+// is started (SystemOptions::restart_min_lost_frames), and once that one has posed more frames the first one's
+// frames lose their poses. Measured (scene seeds 1-3): restarted at frame 20, frames 30-119 posed (90), ATE 2.8-13.8 cm over
 // the 119 m path; without the restart 10 frames posed. Bounds: one restart, at frames 20-30; the new map's
 // initialisation after the blackout; at least 80 frames posed, none of frames 0-9; ATE under 1 % of the path
 // (1.19 m), the robustness matrix's rule.
