@@ -295,6 +295,7 @@ void ImageRun::RunFrames() {
         progress.Clear(), spdlog::warn("frame {}: {}", r.index, r.note);
         map_restarts.push_back({{"frame", r.index}, {"why", r.note}});
       }
+      if (r.initialisation && !r.note.empty()) init_of_map.try_emplace(map_restarts.size(), r.index, r.note);
       if (r.initialisation && !r.note.empty() && !init_frame) {
         init_frame = r.index;
         init_note = r.note;
@@ -398,13 +399,14 @@ void ImageRun::RunFrames() {
     if (failure.empty()) failure = e.what();
   }
   times = clock.Elapsed();
-  // The initialisation of the map whose frames the run kept (a restart may have replaced the first one).
+  // The initialisation of the map whose frames the run kept (a restart may have replaced the first one): the
+  // first map whose initialisation's frame still has its pose.
   if (!map_restarts.empty()) {
     init_frame.reset();
-    for (const slam::FrameReport& r : reports)
-      if (r.initialisation && !r.note.empty() && r.has_pose) {
-        init_frame = r.index;
-        init_note = r.note;
+    for (const auto& [map, init] : init_of_map)
+      if (auto it = report_of_index.find(init.first); it != report_of_index.end() && reports[it->second].has_pose) {
+        init_frame = init.first;
+        init_note = init.second;
         break;
       }
   }

@@ -55,6 +55,7 @@ struct ImageRun {
   nlohmann::json init_rejections = nlohmann::json::array();  // initialisations found and refused, and why
   nlohmann::json depth_reversals = nlohmann::json::array();  // maps found mirrored in depth while settling, flipped
   nlohmann::json map_restarts = nlohmann::json::array();  // maps dropped after staying lost, and why
+  std::map<size_t, std::pair<int64_t, std::string>> init_of_map;  // per map (restarts before it): its initialisation
   int tracked = 0, lost = 0;
   int64_t frames_processed = 0, frames_read = 0;
   int64_t frames_decoded = 0;  // frames the source gave, from its first (before --start included)

@@ -238,52 +238,64 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   lost_run_ = lost ? lost_run_ + 1 : 0;
   if (!lost || options_.restart_min_lost_frames == 0 || !loaded_points_.empty() || lost_run_ < options_.restart_min_lost_frames)
     return now;
-  std::vector<int64_t> posed;
+  std::vector<const FrameRecord*> posed;
   for (const FrameRecord& f : map_.frames)
-    if (f.has_pose) posed.push_back(f.index);
-  if (lost_run_ <= static_cast<int>(posed.size())) return now;
-  // The dropped map's frames, reported again without a pose. Its pending adjustment is applied first: its thread
-  // reads the map.
+    if (f.has_pose) posed.push_back(&f);
+  if (posed.empty() || lost_run_ <= static_cast<int>(posed.size())) return now;
+  // Its pending adjustment is applied first (its thread reads the map); its revised report goes with the map.
   ApplyPendingAdjustment();
   held_reports_.clear();
-  // Reported once the new map has posed more frames than this one: until then this map's poses stand, and a run
-  // that ends first keeps them (Finish).
-  std::vector<FrameReport> out;
-  std::sort(posed.begin(), posed.end());
-  for (int64_t index : posed) {
-    FrameReport r;
-    r.index = index;
-    for (const FrameRecord& f : map_.frames)
-      if (f.index == index) r.stamp_s = f.stamp_s;
-    r.status = FrameStatus::kLost;
-    r.map_dropped = true;
-    r.note = fmt::format("its map was replaced: lost at frame {} for {} frames in a row, more than the {} it posed, "
-                         "and the map started then posed more",
-                         frame.index, lost_run_, posed.size());
-    out.push_back(std::move(r));
-  }
   const std::string why = fmt::format("lost for {} frames in a row, more than the {} frames the map posed ({}-{}): a "
                                       "new map is started, which replaces this one once it has posed more frames",
-                                      lost_run_, posed.size(), posed.front(), posed.back());
+                                      lost_run_, posed.size(), posed.front()->index, posed.back()->index);
+  // This map's frames, reported again without a pose: once the new map has posed more frames than this one (until
+  // then this map's poses stand, and a run that ends first keeps them: Finish).
+  std::vector<FrameReport> dropped;
+  for (const FrameRecord* f : posed) {
+    FrameReport r;
+    r.index = f->index;
+    r.stamp_s = f->stamp_s;
+    r.status = FrameStatus::kLost;
+    r.map_dropped = true;
+    r.note = fmt::format("its map was replaced: lost at frame {} for {} frames in a row, more than the {} it posed",
+                         frame.index, lost_run_, posed.size());
+    dropped.push_back(std::move(r));
+  }
+  std::vector<FrameReport> out;
+  std::vector<FrameReport> pending;
+  std::optional<Map> pending_map;
+  int pending_posed = 0;
+  if (dropped_map_) {
+    // A map before this one still waits to be replaced (this one never posed more than it): it stays the one a new
+    // map must outgrow, and this one's frames lose their poses now.
+    out = std::move(dropped);
+    pending = std::move(dropped_reports_);
+    pending_map = std::move(dropped_map_);
+    pending_posed = dropped_posed_;
+  } else {
+    pending = std::move(dropped);
+    pending_posed = static_cast<int>(posed.size());
+    pending_map = std::move(map_);
+  }
   // A new System in this one's place, with its kernels, camera as given, options and baseline oracle.
   std::unique_ptr<compute::PoseKernel> pose_kernel = tracker_->ReleaseKernel();
   std::unique_ptr<compute::PointKernel> point_kernel = std::move(point_kernel_);
   auto oracle = std::move(oracle_);
-  Map dropped_map = std::move(map_);
   const int restarts = restarts_ + 1;
   *this = System(given_camera_, options_, std::move(pose_kernel), std::move(point_kernel));
   oracle_ = std::move(oracle);
   restarts_ = restarts;
-  dropped_reports_ = std::move(out);
-  dropped_map_ = std::move(dropped_map);
-  dropped_posed_ = static_cast<int>(posed.size());
+  dropped_reports_ = std::move(pending);
+  dropped_map_ = std::move(pending_map);
+  dropped_posed_ = pending_posed;
   std::vector<FrameReport> again = ProcessFrame(frame);
   for (FrameReport& r : again)
     if (r.index == frame.index) {
       r.map_restarted = true;
       r.note = why + (r.note.empty() ? "" : "; " + r.note);
     }
-  return again;
+  out.insert(out.end(), std::make_move_iterator(again.begin()), std::make_move_iterator(again.end()));
+  return out;
 }
 
 void System::StartInMap(std::vector<MapPoint> points, std::vector<FrameRecord> keyframes,

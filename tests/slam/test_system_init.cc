@@ -311,6 +311,37 @@ TEST(System, AMapLostForLongerThanItPosedIsReplacedByANewOne) {
   EXPECT_GT(short_run.map.points.size(), 20u) << "the first map's points are the result";
 }
 
+// Two restarts before a map outgrows the first: the first map (frames 0-29, 30 posed) is lost in a blackout, a
+// second map is made from frames 80-104 (new ids) and lost in a second blackout before it posed more than 30
+// frames, and a third map from frame 160 on (other ids again). The second map is dropped at the second restart (it
+// never outgrew the first), the first once the third has posed more than 30 frames: the trajectory is the third
+// map's alone. Measured: the second map posed 25 frames (80-104) before it was dropped; the third all of 160-299.
+TEST(System, ASecondRestartDropsTheMapThatNeverOutgrewTheFirst) {
+  apps::SequenceInput in = Scenario(300, 0.5, 0.0);
+  for (size_t i = 0; i < in.frames.size(); ++i) {
+    if ((i >= 30 && i < 80) || (i >= 105 && i < 160)) in.frames[i].features.clear();
+    const int64_t offset = i >= 160 ? 2000000 : i >= 80 ? 1000000 : 0;
+    for (FeatureObservation& f : in.frames[i].features) f.feature_id += offset;
+  }
+  const apps::SlamRunResult res = RunSystem(in);
+  int posed_first = 0, posed_second = 0, dropped_second = 0, posed_third = 0;
+  for (const FrameReport& r : res.reports) {
+    posed_first += r.index < 30 && r.has_pose;
+    posed_second += r.index >= 80 && r.index < 105 && r.has_pose;
+    dropped_second += r.index >= 80 && r.index < 105 && r.map_dropped;
+    posed_third += r.index >= 160 && r.has_pose;
+  }
+  std::printf("[ restart  ] posed: first map %d, second %d (dropped %d), third %d\n", posed_first, posed_second,
+              dropped_second, posed_third);
+  EXPECT_EQ(posed_first, 0);
+  EXPECT_EQ(posed_second, 0);
+  EXPECT_GT(dropped_second, 0) << "the second map initialised and was dropped";
+  EXPECT_GE(posed_third, 100);
+  const auto err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false));
+  EXPECT_FALSE(err.mirrored);
+  EXPECT_LT(err.ate_m.mean, 0.02);  // one map's frames: the noisy scenario's bound
+}
+
 // The first map waits for a sharp frame: a frame the front end measured as blurred (FrameObservations::blurred)
 // does not end the initialisation. The scenario's frames 0-39 flagged blurred: the initialisation, which comes at
 // frame 14 on these observations (measured), waits for frame 40 (the waiting frames' notes are replaced when the
