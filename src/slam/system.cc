@@ -226,6 +226,7 @@ std::vector<FrameReport> System::Process(const FrameObservations& frame) {
   if (dropped_map_ && PosedFrames() > dropped_posed_) {
     std::vector<FrameReport> dropped = std::exchange(dropped_reports_, {});
     dropped_map_.reset();
+    dropped_self_calibration_.reset();
     out.insert(out.end(), std::make_move_iterator(dropped.begin()), std::make_move_iterator(dropped.end()));
   }
   out.insert(out.end(), std::make_move_iterator(now.begin()), std::make_move_iterator(now.end()));
@@ -264,6 +265,7 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   std::vector<FrameReport> out;
   std::vector<FrameReport> pending;
   std::optional<Map> pending_map;
+  std::optional<SelfCalibration> pending_calibration;
   int pending_posed = 0;
   if (dropped_map_) {
     // A map before this one still waits to be replaced (this one never posed more than it): it stays the one a new
@@ -271,11 +273,13 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
     out = std::move(dropped);
     pending = std::move(dropped_reports_);
     pending_map = std::move(dropped_map_);
+    pending_calibration = std::move(dropped_self_calibration_);
     pending_posed = dropped_posed_;
   } else {
     pending = std::move(dropped);
     pending_posed = static_cast<int>(posed.size());
     pending_map = std::move(map_);
+    pending_calibration = self_calibration_;
   }
   // A new System in this one's place, with its kernels, camera as given, options and baseline oracle.
   std::unique_ptr<compute::PoseKernel> pose_kernel = tracker_->ReleaseKernel();
@@ -287,6 +291,7 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   restarts_ = restarts;
   dropped_reports_ = std::move(pending);
   dropped_map_ = std::move(pending_map);
+  dropped_self_calibration_ = std::move(pending_calibration);
   dropped_posed_ = pending_posed;
   std::vector<FrameReport> again = ProcessFrame(frame);
   for (FrameReport& r : again)

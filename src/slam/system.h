@@ -406,7 +406,10 @@ class System {
   const std::vector<std::pair<int64_t, int64_t>>& merged_tracks() const { return merged_tracks_; }
   // The camera the map is made with: the given one, or with its k1 self-calibrated (InitOptions::self_calibrate).
   const PinholeCamera& camera() const { return camera_; }
-  const SelfCalibration& self_calibration() const { return self_calibration_; }
+  // (Of result_map()'s map: after a restart that kept the old map, the old map's measure.)
+  const SelfCalibration& self_calibration() const {
+    return &result_map() != &map_ && dropped_self_calibration_ ? *dropped_self_calibration_ : self_calibration_;
+  }
   // How many times the map was dropped and started again (SystemOptions::restart_min_lost_frames).
   int restarts() const { return restarts_; }
 
@@ -598,6 +601,7 @@ class System {
   // frames than its dropped_posed_), and the map itself until then (result_map).
   std::vector<FrameReport> dropped_reports_;
   std::optional<Map> dropped_map_;
+  std::optional<SelfCalibration> dropped_self_calibration_;
   int dropped_posed_ = 0;
   bool finished_with_dropped_map_ = false;  // Finish kept it
   int PosedFrames() const;
