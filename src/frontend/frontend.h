@@ -189,6 +189,7 @@ struct FrameStats {
   int lost_anchor = 0;            // no longer matches the patch it was born with (see anchor_every)
   int anchored = 0;               // tracks aligned with their birth patch in this frame
   int reanchored = 0;             // ... of which took a new patch (the view changed too much)
+  float noise_grey = 0;           // the image's noise measured for the birth-patch alignment (grey levels, sigma)
   float anchor_sharpness = 0;     // median over the aligned tracks of their patch's sharpness over their birth patch's
   float exposure_gain = 1;        // the gain the previous frame was brought to this frame's exposure with (1: none)
   bool blurred = false;           // anchor_sharpness < anchor_blur_ratio: no track dropped or re-anchored on a mismatch

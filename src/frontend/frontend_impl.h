@@ -95,14 +95,22 @@ enum class AnchorOutcome : uint8_t { kNotAligned, kKept, kReanchor, kMismatch };
 // and the warp's linear part.
 inline AnchorOutcome AlignWithAnchor(const cv::Mat& gray, const AffinePatch& anchor, const cv::Point2f& uv,
                               const FrontendOptions& o, cv::Point2f* aligned, cv::Matx22f* linear,
-                              float* sharpness_ratio) {
+                              float* sharpness_ratio, float noise_variance) {
   const AffinePatch::Result r =
       anchor.Align(gray, uv, *linear, o.anchor_max_iterations, static_cast<float>(o.anchor_epsilon_px));
   // Too near the edge to align: the track keeps its LK position this frame.
   if (!r.inside) return AnchorOutcome::kNotAligned;
   *sharpness_ratio = anchor.sharpness() > 0 ? r.sharpness / anchor.sharpness() : 0.0f;
+  // Noise caps the correlation a patch can reach with its birth patch even where the track is right: at most
+  // sqrt(1 - noise / variance) for each of the two (a dark scene, a high gain: the rendered paper scene at a
+  // quarter of its contrast with twice its noise correlates ~0.85 on its followed tracks, and at 0.9 the frame's
+  // many mismatches took new patches every frame, so the tracks slid). The threshold is lowered by that cap where
+  // it is under 0.95; a textured patch in a normal image (cap over 0.99) keeps anchor_min_correlation.
+  const float cap = std::sqrt(std::max(0.0f, 1.0f - noise_variance / std::max(anchor.variance(), 1e-6f)) *
+                              std::max(0.0f, 1.0f - noise_variance / std::max(r.variance, 1e-6f)));
+  const float min_correlation = static_cast<float>(o.anchor_min_correlation) * std::min(1.0f, cap / 0.95f);
   // A mirrored warp (negative determinant) is no view of the same surface.
-  if (r.left_image || !(r.correlation >= o.anchor_min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px) ||
+  if (r.left_image || !(r.correlation >= min_correlation) || !(cv::norm(r.centre - uv) <= o.anchor_max_shift_px) ||
       !(cv::determinant(r.linear) > 0))
     return AnchorOutcome::kMismatch;
   *aligned = r.centre;

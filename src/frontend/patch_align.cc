@@ -184,6 +184,7 @@ AffinePatch::Result AffinePatch::Align(const cv::Mat& gray, const cv::Point2f& c
     r.linear = L;
     r.iterations = it;
     r.correlation = norm > 1e-9 ? static_cast<float>(dt / (norm * norm_)) : 0.0f;
+    r.variance = nn / static_cast<float>(n);
     if (it == max_iterations || norm <= 1e-9) break;
     const double scale = norm_ / norm;
     const std::array<float, 6> bd = {b0, b1, b2, b3, b4, b5};

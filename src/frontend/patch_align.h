@@ -31,6 +31,7 @@ class AffinePatch {
   // How sharp the patch is, whatever its gain and bias: the mean squared intensity gradient over the intensity
   // variance (PatchSharpness). Blur lowers it; a brighter or darker view of the same patch does not.
   float sharpness() const { return sharpness_; }
+  float variance() const { return side_ > 0 ? norm_ * norm_ / static_cast<float>(side_ * side_) : 0.0f; }
 
   struct Result {
     bool inside = false;      // false: the patch does not fit in the image at the start; nothing else is set
@@ -41,6 +42,7 @@ class AffinePatch {
     cv::Matx22f linear;       // image offset = linear * patch offset (from the patch's centre)
     int iterations = 0;
     float sharpness = 0;      // the sampled patch's sharpness() at the final warp
+    float variance = 0;       // the sampled patch's intensity variance at the final warp
   };
   // Aligns with `gray` starting from (centre, linear); stops when an update moves the patch's corners by less
   // than `epsilon_px`, or after `max_iterations`. `gray` is 8-bit or float (CV_32FC1): the same pixel values give
