@@ -32,10 +32,7 @@ Exposure MeasureExposure(const cv::Mat& prev, const cv::Mat& cur, const std::vec
   }
   Exposure e;
   e.n = static_cast<int>(gains.size());
-  if (e.n == 0) return e;
-  std::vector<double> g = gains;
-  std::nth_element(g.begin(), g.begin() + e.n / 2, g.end());
-  e.gain = g[static_cast<size_t>(e.n / 2)];
+  if (e.n > 0) e.gain = UpperMedianInPlace(&gains);
   return e;
 }
 
@@ -206,16 +203,15 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     // that edges do not count).
     float noise_variance = 0;
     if (!due.empty() && gray.rows >= 3 && gray.cols >= 3) {
-      std::vector<float> response;
+      std::vector<double> response;
       response.reserve(static_cast<size_t>((gray.rows / 2) * gray.cols));
       for (int y = 1; y + 1 < gray.rows; y += 2) {
         const uint8_t *a = gray.ptr<uint8_t>(y - 1), *b = gray.ptr<uint8_t>(y), *c = gray.ptr<uint8_t>(y + 1);
         for (int x = 1; x + 1 < gray.cols; ++x)
-          response.push_back(std::abs(static_cast<float>(a[x - 1] - 2 * a[x] + a[x + 1] - 2 * b[x - 1] + 4 * b[x] -
+          response.push_back(std::abs(static_cast<double>(a[x - 1] - 2 * a[x] + a[x + 1] - 2 * b[x - 1] + 4 * b[x] -
                                                          2 * b[x + 1] + c[x - 1] - 2 * c[x] + c[x + 1])));
       }
-      std::nth_element(response.begin(), response.begin() + static_cast<std::ptrdiff_t>(response.size() / 2), response.end());
-      const float sigma = response[response.size() / 2] / (0.6745f * 6.0f);
+      const float sigma = static_cast<float>(UpperMedianInPlace(&response)) / (0.6745f * 6.0f);
       noise_variance = sigma * sigma;
       st.noise_grey = sigma;
     }
@@ -241,13 +237,10 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
   // sigma 2 px: a third of the tracks took blurred patches in each such frame, ATE 0.32 -> 2.2 cm). Such a frame
   // keeps the LK positions of its mismatches and takes no new patch. The frame's measure is the median over its
   // aligned tracks of the sharpness ratio (AffinePatch::sharpness, invariant to gain and bias).
-  std::vector<float> ratios;
+  std::vector<double> ratios;
   for (float r : sharpness_ratio)
     if (r >= 0) ratios.push_back(r);
-  if (!ratios.empty()) {
-    std::nth_element(ratios.begin(), ratios.begin() + static_cast<std::ptrdiff_t>(ratios.size() / 2), ratios.end());
-    st.anchor_sharpness = ratios[ratios.size() / 2];
-  }
+  st.anchor_sharpness = static_cast<float>(UpperMedianInPlace(&ratios));
   // A blur that lasts (a lens out of focus, a long shake) is the look the camera has now: after
   // kMaxBlurredFrames frames in a row the frames count as sharp again, and the tracks take its patches.
   constexpr int kMaxBlurredFrames = 5;

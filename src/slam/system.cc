@@ -34,6 +34,17 @@ namespace {
 
 void Fail(const std::string& what) { throw std::invalid_argument(what); }
 
+// The report of a frame that loses its pose with its map (SystemOptions::restart_min_lost_frames).
+FrameReport DroppedReport(const FrameRecord& f, std::string note) {
+  FrameReport r;
+  r.index = f.index;
+  r.stamp_s = f.stamp_s;
+  r.status = FrameStatus::kLost;
+  r.map_dropped = true;
+  r.note = std::move(note);
+  return r;
+}
+
 }  // namespace
 
 PoseMethod ParsePoseMethod(const std::string& name) {
@@ -190,18 +201,11 @@ std::vector<FrameReport> System::Finish() {
   if (!dropped_map_) return out;
   // The run ended before the map started after a restart outgrew the one before it: that one's poses stand, and
   // the new map's frames lose theirs (one map's frames in the trajectory).
-  for (const FrameRecord& f : map_.frames) {
-    if (!f.has_pose) continue;
-    FrameReport r;
-    r.index = f.index;
-    r.stamp_s = f.stamp_s;
-    r.status = FrameStatus::kLost;
-    r.map_dropped = true;
-    r.note = fmt::format("posed in a map started after the map before it stayed lost; the run ended before it posed "
-                         "more frames than the {} of that map, whose poses stand",
-                         dropped_posed_);
-    out.push_back(std::move(r));
-  }
+  const std::string note = fmt::format("posed in a map started after the map before it stayed lost; the run ended "
+                                       "before it posed more frames than the {} of that map, whose poses stand",
+                                       dropped_posed_);
+  for (const FrameRecord& f : map_.frames)
+    if (f.has_pose) out.push_back(DroppedReport(f, note));
   finished_with_dropped_map_ = true;
   return out;
 }
@@ -251,17 +255,11 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
                                       lost_run_, posed.size(), posed.front()->index, posed.back()->index);
   // This map's frames, reported again without a pose: once the new map has posed more frames than this one (until
   // then this map's poses stand, and a run that ends first keeps them: Finish).
+  const std::string note = fmt::format(
+      "its map was replaced: lost at frame {} for {} frames in a row, more than the {} it posed", frame.index, lost_run_,
+      posed.size());
   std::vector<FrameReport> dropped;
-  for (const FrameRecord* f : posed) {
-    FrameReport r;
-    r.index = f->index;
-    r.stamp_s = f->stamp_s;
-    r.status = FrameStatus::kLost;
-    r.map_dropped = true;
-    r.note = fmt::format("its map was replaced: lost at frame {} for {} frames in a row, more than the {} it posed",
-                         frame.index, lost_run_, posed.size());
-    dropped.push_back(std::move(r));
-  }
+  for (const FrameRecord* f : posed) dropped.push_back(DroppedReport(*f, note));
   std::vector<FrameReport> out;
   std::vector<FrameReport> pending;
   std::optional<Map> pending_map;
