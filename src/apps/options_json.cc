@@ -54,7 +54,8 @@ NLOHMANN_JSON_SERIALIZE_ENUM(FrontendOptions::AnchorMismatch, {{FrontendOptions:
                                                                {FrontendOptions::AnchorMismatch::kDrop, "drop"},
                                                                {FrontendOptions::AnchorMismatch::kReanchor, "reanchor"}})
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(
-    FrontendOptions, max_features, cell_size_px, max_new_per_cell, quality_level, min_distance_px, min_cells,
+    FrontendOptions, max_features, cell_size_px, max_new_per_cell, quality_level, corner_noise_margin,
+    corner_noise_fraction, min_distance_px, min_cells,
     block_size, border_px, pyramid_levels, retry_pyramid_levels, window_px, jolt_recovery, jolt_min_shift_px,
     jolt_min_failed_fraction, max_iterations, epsilon_px, min_eigen_threshold, max_forward_backward_px,
     max_patch_error, exposure_min_change, track_border_px, anchor_every, anchor_patch_px, anchor_min_correlation, anchor_max_shift_px,

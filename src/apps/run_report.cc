@@ -107,7 +107,7 @@ constexpr const char* kFrontEndColumns =
     "fe_lost,fe_lost_status,fe_lost_forward_backward,fe_lost_patch_error,fe_lost_outside,fe_lost_anchor,fe_anchored,"
     "fe_reanchored,fe_anchor_shift_px,fe_retried,fe_recovered,"
     "fe_remap_requests,fe_remapped,fe_remap_refused_id,fe_remap_outside,fe_remap_no_candidate,fe_remap_no_match,"
-    "fe_remap_over_budget,fe_remap_deferred,fe_refreshed,fe_jolt_recovered,fe_sharpness,fe_blurred,fe_exposure_gain,"
+    "fe_remap_over_budget,fe_remap_deferred,fe_refreshed,fe_jolt_recovered,fe_sharpness,fe_blurred,fe_exposure_gain,fe_noise_grey,"
     "decode_ms,backend_ms,fe_convert_ms,"
     "fe_pyramid_ms,fe_track_ms,fe_anchor_ms,fe_detect_ms,fe_remap_ms,fe_describe_ms,fe_describe_wait_ms,fe_total_ms,frame_ms";
 
@@ -136,7 +136,8 @@ std::string SkippedCells(const FrameRow& row) {
     else if (name == "frame_ms")
       out += fmt::format("{:.3f}", row.frame_ms);
     else if (!(ends_with("_ms") || name.starts_with("reproj_") || name.starts_with("sigma_") || name == "score" ||
-               name == "trans_err_m" || name == "rot_err_deg" || name == "fe_sharpness" || name == "fe_exposure_gain"))
+               name == "trans_err_m" || name == "rot_err_deg" || name == "fe_sharpness" || name == "fe_exposure_gain" ||
+               name == "fe_noise_grey"))
       out += '0';
     begin = end + 1;
   }
@@ -163,13 +164,13 @@ std::string BackEndCells(const slam::FrameReport& r, const std::map<int64_t, con
 std::string FrontEndCells(const FrameRow& row) {
   const frontend::FrameStats& s = row.fe;
   return fmt::format(
-      "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{},{:.3f},{:.3f},{:.3f},"
+      "{},{},{},{},{},{},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{},{:.3f},{:.3f},{:.3f},{:.3f},"
       "{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f}",
       row.features, s.tracked, s.detected, row.lost_tracks, s.lost_status, s.lost_forward_backward, s.lost_patch_error,
       s.lost_outside, s.lost_anchor, s.anchored, s.reanchored, s.mean_anchor_shift_px, s.retried, s.recovered,
       s.remap_requests, s.remapped, s.remap_refused_id, s.remap_outside, s.remap_no_candidate, s.remap_no_match,
       s.remap_over_budget, s.remap_deferred, s.refreshed, s.jolt_recovered, s.anchor_sharpness, int(s.blurred),
-      s.exposure_gain, row.decode_ms, row.backend_ms, s.convert_ms,
+      s.exposure_gain, s.noise_grey, row.decode_ms, row.backend_ms, s.convert_ms,
       s.pyramid_ms, s.track_ms, s.anchor_ms, s.detect_ms, s.remap_ms, s.describe_ms, s.describe_wait_ms, s.total_ms, row.frame_ms);
 }
 

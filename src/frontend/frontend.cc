@@ -1,4 +1,5 @@
 #include "frontend/frontend_impl.h"
+#include "frontend/image_noise.h"
 
 #include <algorithm>
 #include <cmath>
@@ -50,6 +51,10 @@ void FrontendOptions::Check() const {
   if (max_new_per_cell < 1) fail(fmt::format("max_new_per_cell must be >= 1 (got {})", max_new_per_cell));
   if (!(quality_level > 0 && quality_level < 1))
     fail(fmt::format("quality_level must be in (0, 1) (got {})", quality_level));
+  if (!(corner_noise_margin >= 0 && std::isfinite(corner_noise_margin)))
+    fail(fmt::format("corner_noise_margin must be >= 0 (got {})", corner_noise_margin));
+  if (!(corner_noise_fraction > 0 && corner_noise_fraction < 1))
+    fail(fmt::format("corner_noise_fraction must be in (0, 1) (got {})", corner_noise_fraction));
   if (!(min_distance_px >= 0) || !std::isfinite(min_distance_px))
     fail(fmt::format("min_distance_px must be >= 0 (got {})", min_distance_px));
   if (block_size < 2 || block_size > 31) fail(fmt::format("block_size must be in [2, 31] (got {})", block_size));
@@ -133,6 +138,9 @@ FrameResult Frontend::Process(const cv::Mat& image, int64_t index, double stamp_
   if (!m.size.empty() && gray.size() != m.size)
     throw std::invalid_argument(fmt::format("frame {}: image is {}x{} but the previous frames were {}x{} (Reset first)",
                                             index, gray.cols, gray.rows, m.size.width, m.size.height));
+  // The camera's noise, measured on every frame (a camera's gain follows the light): the detection's threshold and
+  // the birth-patch alignment's correlation threshold follow it.
+  st.noise_grey = ImageNoiseSigma(gray);
   st.convert_ms = MsSince(t0);
 
   // The tracks must hold their descriptors before any of them is reported lost or used for remapping.

@@ -1,6 +1,7 @@
 // The front end's detection and remapping stage: Shi-Tomasi corners in the empty cells, lost map points found
 // again by their descriptors near their projection (paper §6.4).
 #include "frontend/frontend_impl.h"
+#include "frontend/image_noise.h"
 
 namespace mcslam::frontend {
 
@@ -64,7 +65,12 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     if (radius >= 0)
       for (const Track& t : tracks)
         cv::circle(blocked, cv::Point(cvRound(t.uv.x), cvRound(t.uv.y)), radius, 255, cv::FILLED);
-    const float threshold = static_cast<float>(o.quality_level * max_response);
+    // A fraction of the frame's strongest response, and no less than what the frame's own noise reaches
+    // (FrontendOptions::corner_noise_margin).
+    if (noise_corner_unit < 0) noise_corner_unit = NoiseCornerResponse(o.block_size, o.corner_noise_fraction);
+    const double noise_floor =
+        o.corner_noise_margin * noise_corner_unit * static_cast<double>(st.noise_grey) * static_cast<double>(st.noise_grey);
+    const float threshold = static_cast<float>(std::max(o.quality_level * max_response, noise_floor));
     // Only cells that can take a new corner or that a remap window touches are searched.
     std::vector<char> search(occupancy.size(), 0);
     if (budget > 0)

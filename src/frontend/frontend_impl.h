@@ -170,6 +170,7 @@ struct Frontend::Impl {
   // Scratch kept between frames to avoid reallocating.
   cv::Mat eig, eig_dilated, blocked, hann;
   cv::Mat gray_float;  // the frame as float pixels, for the birth-patch alignment's vector gathers
+  double noise_corner_unit = -1;  // NoiseCornerResponse for the options, measured at the first detection
 
   double JoinDescription() {
     if (!pending) return 0.0;

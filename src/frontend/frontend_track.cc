@@ -198,23 +198,8 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     // Float pixels: the alignment's bilinear samples are then vector gathers (the same values as from the 8-bit
     // frame, so the same result up to float rounding; 1.6x faster than 8-bit samples, bench_patch_align).
     if (!due.empty()) gray.convertTo(gray_float, CV_32F);
-    // The image's noise, robustly: the median absolute response to the 3x3 Laplacian-of-differences mask (its L2
-    // norm 6) over every other row, as a Gaussian's MAD (Immerkaer's estimator, with the median for the mean so
-    // that edges do not count).
-    float noise_variance = 0;
-    if (!due.empty() && gray.rows >= 3 && gray.cols >= 3) {
-      std::vector<double> response;
-      response.reserve(static_cast<size_t>((gray.rows / 2) * gray.cols));
-      for (int y = 1; y + 1 < gray.rows; y += 2) {
-        const uint8_t *a = gray.ptr<uint8_t>(y - 1), *b = gray.ptr<uint8_t>(y), *c = gray.ptr<uint8_t>(y + 1);
-        for (int x = 1; x + 1 < gray.cols; ++x)
-          response.push_back(std::abs(static_cast<double>(a[x - 1] - 2 * a[x] + a[x + 1] - 2 * b[x - 1] + 4 * b[x] -
-                                                         2 * b[x + 1] + c[x - 1] - 2 * c[x] + c[x + 1])));
-      }
-      const float sigma = static_cast<float>(UpperMedianInPlace(&response)) / (0.6745f * 6.0f);
-      noise_variance = sigma * sigma;
-      st.noise_grey = sigma;
-    }
+    // The image's noise (measured by Process: image_noise.h) lowers the correlation a patch can reach.
+    const float noise_variance = st.noise_grey * st.noise_grey;
     tbb::parallel_for(size_t{0}, due.size(), [&](size_t k) {
       const size_t i = due[k];
       cv::Point2f aligned = p1[i];

@@ -283,7 +283,7 @@ TEST(CliImages, CorruptFrameIsSkippedAndCounted) {
                            "fe_blurred"})
     EXPECT_EQ(cell(zero), "0") << zero;
   for (const char* empty : {"reproj_mean_px", "track_ms", "trans_err_m", "sigma_tz", "backend_ms", "fe_total_ms",
-                            "fe_sharpness", "fe_exposure_gain"})
+                            "fe_sharpness", "fe_exposure_gain", "fe_noise_grey"})
     EXPECT_EQ(cell(empty), "") << empty;
   EXPECT_GT(std::stod(cell("decode_ms")), 0.0);
   EXPECT_NE(cell("note").find("frame_0020.png"), std::string::npos) << cell("note");

@@ -1,0 +1,71 @@
+// The image-noise measure and the Shi-Tomasi response of pure noise (frontend/image_noise.h).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include <opencv2/imgproc.hpp>
+
+#include "frontend/image_noise.h"
+
+namespace mcslam::frontend {
+namespace {
+
+// A smooth scene (a ramp and a slow sinusoid: what the Laplacian-of-differences mask is blind to) with seeded
+// Gaussian noise of `sigma` grey levels, rounded to 8 bits.
+cv::Mat NoisyRamp(double sigma, uint64_t seed) {
+  cv::Mat f(240, 320, CV_32F);
+  for (int y = 0; y < f.rows; ++y)
+    for (int x = 0; x < f.cols; ++x)
+      f.at<float>(y, x) = static_cast<float>(60.0 + 0.3 * x + 0.2 * y + 20.0 * std::sin(x / 25.0));
+  cv::Mat noise(f.size(), CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, sigma);
+  f += noise;
+  cv::Mat g;
+  f.convertTo(g, CV_8U);
+  return g;
+}
+
+// Immerkaer's estimator on a smooth scene: the noise comes back within 0.3 grey levels plus 5 % (the median of
+// integer responses moves in steps of 1 / (0.6745 * 6) = 0.25 grey levels; the 8-bit rounding adds 0.29 in
+// quadrature, which matters only at sigma 1). Over 5 seeds.
+TEST(ImageNoise, MeasuresTheAddedNoiseOnASmoothScene) {
+  for (double sigma : {1.0, 3.0, 8.0})
+    for (uint64_t seed = 1; seed <= 5; ++seed) {
+      const double expected = std::sqrt(sigma * sigma + 1.0 / 12.0);
+      EXPECT_NEAR(ImageNoiseSigma(NoisyRamp(sigma, seed)), expected, 0.3 + 0.05 * expected)
+          << "sigma " << sigma << " seed " << seed;
+    }
+}
+
+// Sharp edges are a small part of an image: the median ignores them, where a mean of the responses would not.
+TEST(ImageNoise, EdgesDoNotCountAsNoise) {
+  cv::Mat g(240, 320, CV_8U, cv::Scalar(40));
+  for (int x = 0; x < 320; x += 40) cv::rectangle(g, cv::Rect(x, 0, 20, 240), cv::Scalar(200), cv::FILLED);
+  EXPECT_EQ(ImageNoiseSigma(g), 0.0f);
+  EXPECT_EQ(ImageNoiseSigma(cv::Mat(2, 2, CV_8U, cv::Scalar(1))), 0.0f);  // too small for the mask
+}
+
+// The response that noise of sigma 1 exceeds at a given fraction of the pixels scales with sigma^2: on a fresh
+// noise image (another seed) of sigma 5, the pixels above 25 times the one-in-1000 response are about one in 1000.
+// Bounds: a factor of 2 either way (neighbouring responses share their pixels, so the count varies more than a
+// Poisson count of ~230 would).
+TEST(ImageNoise, NoiseCornerResponseScalesWithTheVariance) {
+  const double unit = NoiseCornerResponse(3, 1e-3);
+  ASSERT_GT(unit, 0.0);
+  cv::Mat f(512, 512, CV_32F);
+  cv::RNG rng(99);
+  rng.fill(f, cv::RNG::NORMAL, 128.0, 5.0);
+  cv::Mat g, response;
+  f.convertTo(g, CV_8U);
+  cv::cornerMinEigenVal(g, response, 3, 3);
+  const cv::Mat inner = response(cv::Rect(5, 5, 502, 502));
+  const double above = cv::countNonZero(inner > unit * 25.0) / static_cast<double>(inner.total());
+  EXPECT_GT(above, 0.5e-3);
+  EXPECT_LT(above, 2e-3);
+  // A rarer response is a larger one.
+  EXPECT_GT(NoiseCornerResponse(3, 1e-5), 1.5 * unit);
+}
+
+}  // namespace
+}  // namespace mcslam::frontend
