@@ -7,7 +7,8 @@
 # Usage: scripts/robustness.sh [path/to/mcslam] [out-dir] [seeds] [data-dir] [doc]
 #   (about 25 minutes on 2 cores at 10 seeds)
 # SCENARIOS="paper fast" picks scenarios; SYNTH_FLAGS="--image-scale 2" (or "--distortion -0.28 0.07 0 0") renders
-# every scenario another way (the real sequences are run as they are).
+# every scenario another way (the real sequences are run as they are); RUN_FLAGS="--options-from FILE" runs every
+# cell with other options (a comparison: the figures of a default turned off).
 set -uo pipefail
 MCSLAM=${1:-build/mcslam}
 OUT=${2:-out/robustness}
@@ -16,6 +17,7 @@ DATA=${4:-${MCSLAM_DATA:-../shared/data}}
 DOC=${5:-docs/robustness.md}
 SCENARIOS=${SCENARIOS:-"paper forward rotation planar fast still-start sparse"}
 read -r -a SYNTH_EXTRA <<< "${SYNTH_FLAGS:-}"
+read -r -a RUN_EXTRA <<< "${RUN_FLAGS:-}"
 mkdir -p "$OUT"
 cells="$OUT/cells.tsv"
 : > "$cells"
@@ -24,7 +26,7 @@ cell() {
   local name=$1 seed=$2 gt=$3 run=$4
   shift 4
   mkdir -p "$run"
-  "$MCSLAM" run "$@" --seed "$seed" --out "$run" > "$run/stdout.txt" 2> "$run/log.txt"
+  "$MCSLAM" run "$@" "${RUN_EXTRA[@]}" --seed "$seed" --out "$run" > "$run/stdout.txt" 2> "$run/log.txt"
   printf '%s\t%s\t%s\t%s\t%s\n' "$name" "$seed" "$gt" "$run" "$?" >> "$cells"
   echo "$name seed $seed: $(tail -1 "$run/stdout.txt")"
 }
