@@ -36,7 +36,8 @@ struct SynthArgs {
   CLI::Option* frames_flag = nullptr;
   CLI::Option* fps_flag = nullptr;
   CLI::Option* points_flag = nullptr;
-  std::vector<double> lens;  // k1 k2 p1 p2 [k3]
+  std::vector<double> lens;     // k1 k2 p1 p2 [k3]
+  std::vector<double> fisheye;  // k1 k2 k3 k4
   bool render = false;
   sim::RenderOptions render_options;
 };
@@ -86,13 +87,19 @@ void RunSynth(SynthArgs& a) {
   if (a.frames_flag->count() > 0) o.frames = a.frames;
   if (a.fps_flag->count() > 0) o.fps = a.fps;
   if (a.points_flag->count() > 0) o.num_points = a.points;
-  if (!a.lens.empty()) {
-    const auto at = [&](size_t i) { return i < a.lens.size() ? a.lens[i] : 0.0; };
-    o.lens = Distortion{at(0), at(1), at(2), at(3), at(4)};
+  if (!a.lens.empty() || !a.fisheye.empty()) {
+    if (!a.fisheye.empty()) {
+      o.lens = Distortion{a.fisheye[0], a.fisheye[1], 0.0, 0.0, a.fisheye[2]};
+      o.lens.k4 = a.fisheye[3];
+      o.lens.model = LensModel::kEquidistant;
+    } else {
+      const auto at = [&](size_t i) { return i < a.lens.size() ? a.lens[i] : 0.0; };
+      o.lens = Distortion{at(0), at(1), at(2), at(3), at(4)};
+    }
     try {
       o.Check();
     } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(std::string("--distortion: ") + e.what());
+      throw std::invalid_argument(std::string(a.fisheye.empty() ? "--distortion: " : "--fisheye: ") + e.what());
     }
   }
   // A path that ends (forward: the street) holds only so many frames; say which flags decide it.
@@ -172,6 +179,12 @@ void RegisterSynth(CLI::App& app) {
                   "e.g. a EuRoC-like -0.28 0.07 0 0); the observations and the rendered images go through it and "
                   "camera.yaml declares it. Default: none")
       ->expected(4, 5)
+      ->check(FiniteNumber(-1e6, false, 1e6, "a finite number"));
+  cmd->add_option("--fisheye", args->fisheye,
+                  "A fisheye lens instead (the equidistant / Kannala-Brandt model, ORB-SLAM3's KannalaBrandt8): K1 K2 "
+                  "K3 K4 of theta_d = theta (1 + K1 theta^2 + ... + K4 theta^8); 0 0 0 0 is the ideal equidistant lens")
+      ->expected(4)
+      ->excludes("--distortion")
       ->check(FiniteNumber(-1e6, false, 1e6, "a finite number"));
   cmd->add_option("--image-scale", o.image_scale,
                   "Scales the camera's image size and focal length together: the same field of view at another "

@@ -283,6 +283,7 @@ void ImageRun::WriteReport() {
   j["source"] = data.source->Description();
   j["camera"] = {{"fx", camera.fx}, {"fy", camera.fy}, {"cx", camera.cx}, {"cy", camera.cy},
                  {"width", camera.width}, {"height", camera.height}, {"distorted", camera.HasDistortion()},
+                 {"lens_model", ToString(camera.dist.model)},
                  {"origin", data.camera_origin}};
   j["notes"] = notes;
   j["options"] = {{"backend", backend},

@@ -1,5 +1,6 @@
 #include "core/camera.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -18,8 +19,13 @@ void PinholeCamera::Check() const {
   if (!finite(cx) || !finite(cy)) throw std::invalid_argument(fmt::format("camera: cx, cy must be finite, got {}, {}", cx, cy));
   if (width <= 0 || height <= 0)
     throw std::invalid_argument(fmt::format("camera: image size must be positive, got {}x{}", width, height));
-  for (double v : {dist.k1, dist.k2, dist.p1, dist.p2, dist.k3})
+  for (double v : {dist.k1, dist.k2, dist.p1, dist.p2, dist.k3, dist.k4})
     if (!finite(v)) throw std::invalid_argument("camera: distortion coefficients must be finite");
+  if (dist.IsFisheye() && (dist.p1 != 0 || dist.p2 != 0))
+    throw std::invalid_argument(fmt::format("camera: the equidistant (fisheye) model has no tangential terms, got p1 = {}, "
+                                            "p2 = {}", dist.p1, dist.p2));
+  if (!dist.IsFisheye() && dist.k4 != 0)
+    throw std::invalid_argument(fmt::format("camera: k4 = {} belongs to the equidistant (fisheye) model only", dist.k4));
   // A focal length that leaves almost no field of view is a unit mistake (millimetres or metres for pixels is
   // the other way round; a typo of a few digits this way): the features could never show parallax. The
   // narrowest real lenses (astronomy, 2000 mm on a small sensor) see ~0.3 deg; refuse below a tenth of that.
@@ -47,7 +53,58 @@ Eigen::Vector2d PinholeCamera::PixelToNormalized(const Eigen::Vector2d& p) const
   return {(p.x() - cx) / fx, (p.y() - cy) / fy};
 }
 
+const char* ToString(LensModel model) {
+  return model == LensModel::kEquidistant ? "equidistant" : "radial-tangential";
+}
+
+namespace {
+
+// Kannala-Brandt: theta_d(theta) and its derivative.
+double ThetaD(const Distortion& d, double theta, double* derivative = nullptr) {
+  const double t2 = theta * theta;
+  const double poly = 1.0 + t2 * (d.k1 + t2 * (d.k2 + t2 * (d.k3 + t2 * d.k4)));
+  if (derivative) *derivative = 1.0 + t2 * (3.0 * d.k1 + t2 * (5.0 * d.k2 + t2 * (7.0 * d.k3 + t2 * 9.0 * d.k4)));
+  return theta * poly;
+}
+
+// n -> n / r * theta_d(atan r), with its Jacobian: J = s I + (ds/dr) / r n n^T, s = theta_d / r.
+Eigen::Vector2d DistortEquidistant(const Distortion& d, const Eigen::Vector2d& n, Eigen::Matrix2d* J) {
+  const double r = n.norm();
+  if (r < 1e-12) {  // theta_d = theta + O(theta^3) = r + O(r^3): the identity to first order
+    if (J) J->setIdentity();
+    return n;
+  }
+  const double theta = std::atan(r);
+  double dtd_dtheta = 0;
+  const double td = ThetaD(d, theta, J ? &dtd_dtheta : nullptr);
+  const double s = td / r;
+  if (J) {
+    const double ds_dr = (dtd_dtheta / (1.0 + r * r) - s) / r;
+    *J = s * Eigen::Matrix2d::Identity() + (ds_dr / r) * n * n.transpose();
+  }
+  return s * n;
+}
+
+// The inverse: theta from theta_d = |n_d| by Newton (theta_d grows with theta for any lens that maps its image one to
+// one), then r = tan(theta). Angles are capped just under 90 degrees, where the pinhole's r is unbounded.
+Eigen::Vector2d UndistortEquidistant(const Distortion& d, const Eigen::Vector2d& nd) {
+  const double td = nd.norm();
+  if (td < 1e-12) return nd;
+  constexpr double kMaxTheta = M_PI / 2 - 1e-6;
+  double theta = std::min(td, kMaxTheta);
+  for (int it = 0; it < 30; ++it) {
+    double dtd = 0;
+    const double f = ThetaD(d, theta, &dtd) - td;
+    if (std::abs(f) < 1e-15 || !(dtd > 0)) break;
+    theta = std::clamp(theta - f / dtd, 0.0, kMaxTheta);
+  }
+  return nd * (std::tan(theta) / td);
+}
+
+}  // namespace
+
 Eigen::Vector2d PinholeCamera::Distort(const Eigen::Vector2d& n, Eigen::Matrix2d* J) const {
+  if (dist.IsFisheye()) return DistortEquidistant(dist, n, J);
   const double x = n.x(), y = n.y();
   const double r2 = x * x + y * y;
   const double radial = 1.0 + r2 * (dist.k1 + r2 * (dist.k2 + r2 * dist.k3));
@@ -66,6 +123,7 @@ Eigen::Vector2d PinholeCamera::Distort(const Eigen::Vector2d& n, Eigen::Matrix2d
 
 Eigen::Vector2d PinholeCamera::Undistort(const Eigen::Vector2d& d) const {
   if (!HasDistortion()) return d;
+  if (dist.IsFisheye()) return UndistortEquidistant(dist, d);
   Eigen::Vector2d n = d;  // the distortion is small near the centre: start from the distorted point
   for (int it = 0; it < 30; ++it) {
     Eigen::Matrix2d J;
@@ -127,6 +185,9 @@ PinholeCamera PinholeCamera::Scaled(double f) const {
 }
 
 std::string PinholeCamera::ToString() const {
+  if (dist.IsFisheye())
+    return fmt::format("fisheye (equidistant) {}x{} fx={} fy={} cx={} cy={} k1={} k2={} k3={} k4={}", width, height, fx,
+                       fy, cx, cy, dist.k1, dist.k2, dist.k3, dist.k4);
   return fmt::format("pinhole {}x{} fx={} fy={} cx={} cy={} k1={} k2={} p1={} p2={} k3={}", width, height, fx, fy, cx,
                      cy, dist.k1, dist.k2, dist.p1, dist.p2, dist.k3);
 }

@@ -9,10 +9,25 @@
 
 namespace mcslam {
 
+// The lens model between the ideal pinhole's normalised coordinates n = (x/z, y/z), r = |n|, and the distorted ones:
+// - kRadialTangential (Brown-Conrady: OpenCV's, ORB-SLAM's "PinHole", EuRoC's "radial-tangential"):
+//   n (1 + k1 r^2 + k2 r^4 + k3 r^6) plus the tangential terms of p1, p2;
+// - kEquidistant (Kannala-Brandt, a fisheye: OpenCV's fisheye module, ORB-SLAM3's "KannalaBrandt8", Kalibr's and
+//   TUM-VI's "equidistant"): n / r * theta_d with theta = atan(r), the ray's angle off the axis, and
+//   theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8); p1, p2 are unused (0). Even with every
+//   coefficient 0 it is not a pinhole: the image radius grows with the angle, not its tangent. Rays up to 90 degrees
+//   off the axis only (Unproject returns [x, y, 1]).
+enum class LensModel { kRadialTangential, kEquidistant };
 struct Distortion {
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
-  bool IsZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+  double k4 = 0;  // kEquidistant only
+  LensModel model = LensModel::kRadialTangential;
+  bool IsZero() const {
+    return model == LensModel::kRadialTangential && k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0;
+  }
+  bool IsFisheye() const { return model == LensModel::kEquidistant; }
 };
+const char* ToString(LensModel model);
 
 class PinholeCamera {
  public:

@@ -18,13 +18,13 @@ namespace {
 // Keys of one file style. In ORB-SLAM files the dots are part of the key ("Camera.fx" is one flat key).
 struct CameraKeys {
   const char* style;
-  std::string fx, fy, cx, cy, k1, k2, p1, p2, k3, width, height;
+  std::string fx, fy, cx, cy, k1, k2, p1, p2, k3, width, height, k4;
 };
 
 CameraKeys KeysWithPrefix(const char* style, const std::string& intrinsics, const std::string& size) {
   return {style,           intrinsics + "fx", intrinsics + "fy", intrinsics + "cx", intrinsics + "cy",
           intrinsics + "k1", intrinsics + "k2", intrinsics + "p1", intrinsics + "p2", intrinsics + "k3",
-          size + "width",  size + "height"};
+          size + "width",  size + "height", intrinsics + "k4"};
 }
 
 // Reads a YAML file whose keys are looked up by name; errors name the file, the key and its line.
@@ -120,13 +120,20 @@ PinholeCamera ReadCameraYaml(const std::string& path) {
     detail::Fail(path, "no camera intrinsics found: expected 'Camera.fx' (ORB-SLAM2), 'Camera1.fx' (ORB-SLAM3) or "
                        "'fx' (mcslam) keys");
   }
+  // ORB-SLAM's Camera.type: "PinHole" (radial-tangential) or "KannalaBrandt8" (a fisheye: k1-k4 of the equidistant
+  // model); mcslam's own files say `model: equidistant` for the latter.
+  bool fisheye = false;
   if (yaml.Has("Camera.type")) {
     const std::string type = yaml.String("Camera.type");
-    if (type == "KannalaBrandt8")
-      detail::Fail(path, "Camera.type 'KannalaBrandt8' (fisheye) is not supported: mcslam needs a pinhole camera with "
-                         "radial-tangential distortion (Camera.type: \"PinHole\")");
-    if (type != "PinHole" && type != "Rectified")
-      detail::Fail(path, fmt::format("Camera.type '{}' is not supported (expected \"PinHole\")", type));
+    fisheye = type == "KannalaBrandt8";
+    if (!fisheye && type != "PinHole" && type != "Rectified")
+      detail::Fail(path, fmt::format("Camera.type '{}' is not supported (expected \"PinHole\" or \"KannalaBrandt8\")",
+                                     type));
+  } else if (yaml.Has("model")) {
+    const std::string model = yaml.String("model");
+    fisheye = model == "equidistant" || model == "kannala-brandt";
+    if (!fisheye && model != "radial-tangential" && model != "pinhole")
+      detail::Fail(path, fmt::format("model '{}' is not supported (expected radial-tangential or equidistant)", model));
   }
 
   PinholeCamera cam;
@@ -136,9 +143,14 @@ PinholeCamera ReadCameraYaml(const std::string& path) {
   cam.cy = yaml.Double(keys.cy, keys);
   cam.dist.k1 = yaml.DoubleOr(keys.k1, keys, 0.0);
   cam.dist.k2 = yaml.DoubleOr(keys.k2, keys, 0.0);
-  cam.dist.p1 = yaml.DoubleOr(keys.p1, keys, 0.0);
-  cam.dist.p2 = yaml.DoubleOr(keys.p2, keys, 0.0);
   cam.dist.k3 = yaml.DoubleOr(keys.k3, keys, 0.0);
+  if (fisheye) {
+    cam.dist.model = LensModel::kEquidistant;
+    cam.dist.k4 = yaml.DoubleOr(keys.k4, keys, 0.0);
+  } else {
+    cam.dist.p1 = yaml.DoubleOr(keys.p1, keys, 0.0);
+    cam.dist.p2 = yaml.DoubleOr(keys.p2, keys, 0.0);
+  }
   cam.width = yaml.PositiveInt(keys.width, keys);
   cam.height = yaml.PositiveInt(keys.height, keys);
   try {
@@ -157,16 +169,26 @@ void WriteCameraYaml(const std::string& path, const PinholeCamera& camera, doubl
   }
   std::ofstream out = detail::OpenForWrite(path);
   out << "%YAML:1.0\n\n";
-  out << "# Camera calibration written by mcslam (ORB-SLAM2 style; pinhole, radial-tangential distortion)\n";
+  if (camera.dist.IsFisheye()) {
+    out << "# Camera calibration written by mcslam (ORB-SLAM style; fisheye, the equidistant / Kannala-Brandt model)\n";
+    out << "Camera.type: \"KannalaBrandt8\"\n";
+  } else {
+    out << "# Camera calibration written by mcslam (ORB-SLAM2 style; pinhole, radial-tangential distortion)\n";
+  }
   out << "Camera.fx: " << YamlReal(camera.fx) << "\n";
   out << "Camera.fy: " << YamlReal(camera.fy) << "\n";
   out << "Camera.cx: " << YamlReal(camera.cx) << "\n";
   out << "Camera.cy: " << YamlReal(camera.cy) << "\n\n";
   out << "Camera.k1: " << YamlReal(camera.dist.k1) << "\n";
   out << "Camera.k2: " << YamlReal(camera.dist.k2) << "\n";
-  out << "Camera.p1: " << YamlReal(camera.dist.p1) << "\n";
-  out << "Camera.p2: " << YamlReal(camera.dist.p2) << "\n";
-  out << "Camera.k3: " << YamlReal(camera.dist.k3) << "\n\n";
+  if (camera.dist.IsFisheye()) {
+    out << "Camera.k3: " << YamlReal(camera.dist.k3) << "\n";
+    out << "Camera.k4: " << YamlReal(camera.dist.k4) << "\n\n";
+  } else {
+    out << "Camera.p1: " << YamlReal(camera.dist.p1) << "\n";
+    out << "Camera.p2: " << YamlReal(camera.dist.p2) << "\n";
+    out << "Camera.k3: " << YamlReal(camera.dist.k3) << "\n\n";
+  }
   out << "Camera.width: " << camera.width << "\n";
   out << "Camera.height: " << camera.height << "\n";
   if (fps > 0) out << "\nCamera.fps: " << YamlReal(fps) << "\n";

@@ -205,14 +205,24 @@ EurocCamera ReadEurocSensorYaml(const std::string& path) {
   if (root["distortion_coefficients"].IsDefined()) {
     const std::string model =
         root["distortion_model"].IsDefined() ? root["distortion_model"].Scalar() : "radial-tangential";
-    if (model != "radial-tangential" && model != "radtan")
-      detail::Fail(path, fmt::format("distortion_model '{}' is not supported (expected radial-tangential)", model));
+    const bool fisheye = model == "equidistant";  // Kalibr's name for Kannala-Brandt (TUM-VI, EuRoC-style fisheyes)
+    if (model != "radial-tangential" && model != "radtan" && !fisheye)
+      detail::Fail(path, fmt::format("distortion_model '{}' is not supported (expected radial-tangential or "
+                                     "equidistant)", model));
     const YAML::Node dn = root["distortion_coefficients"];
     const size_t nd = dn.IsSequence() ? dn.size() : 0;
+    if (fisheye && nd != 4)
+      detail::Fail(path, "key 'distortion_coefficients' must list 4 numbers (k1 k2 k3 k4) for the equidistant model");
     if (nd != 4 && nd != 5)
       detail::Fail(path, "key 'distortion_coefficients' must list 4 or 5 numbers (k1 k2 p1 p2 [k3])");
     const auto dc = YamlNumbers(dn, path, "distortion_coefficients", nd);
-    out.camera.dist = {dc[0], dc[1], dc[2], dc[3], nd == 5 ? dc[4] : 0.0};
+    if (fisheye) {
+      out.camera.dist = {dc[0], dc[1], 0.0, 0.0, dc[2]};
+      out.camera.dist.k4 = dc[3];
+      out.camera.dist.model = LensModel::kEquidistant;
+    } else {
+      out.camera.dist = {dc[0], dc[1], dc[2], dc[3], nd == 5 ? dc[4] : 0.0};
+    }
   }
   if (res[0] != std::floor(res[0]) || res[1] != std::floor(res[1]))
     detail::Fail(path, "key 'resolution' must hold integers");

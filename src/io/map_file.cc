@@ -26,7 +26,8 @@ bool Finite(const Eigen::Vector3d& v) { return v.allFinite(); }
 
 json CameraJson(const PinholeCamera& c) {
   return {{"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx}, {"cy", c.cy}, {"width", c.width}, {"height", c.height},
-          {"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3}};
+          {"k1", c.dist.k1}, {"k2", c.dist.k2}, {"p1", c.dist.p1}, {"p2", c.dist.p2}, {"k3", c.dist.k3},
+          {"k4", c.dist.k4}, {"model", ToString(c.dist.model)}};
 }
 
 // nlohmann's CBOR reader recurses once per nesting level without a limit: a file of a million nested arrays
@@ -115,7 +116,10 @@ std::string CameraDifference(const PinholeCamera& a, const PinholeCamera& b) {
   const std::pair<const char*, std::pair<double, double>> fields[] = {
       {"fx", {a.fx, b.fx}},           {"fy", {a.fy, b.fy}},           {"cx", {a.cx, b.cx}},
       {"cy", {a.cy, b.cy}},           {"k1", {a.dist.k1, b.dist.k1}}, {"k2", {a.dist.k2, b.dist.k2}},
-      {"p1", {a.dist.p1, b.dist.p1}}, {"p2", {a.dist.p2, b.dist.p2}}, {"k3", {a.dist.k3, b.dist.k3}}};
+      {"p1", {a.dist.p1, b.dist.p1}}, {"p2", {a.dist.p2, b.dist.p2}}, {"k3", {a.dist.k3, b.dist.k3}},
+      {"k4", {a.dist.k4, b.dist.k4}}};
+  if (a.dist.model != b.dist.model)
+    d.push_back(fmt::format("lens model {} against {}", ToString(a.dist.model), ToString(b.dist.model)));
   for (const auto& [name, v] : fields)
     if (differs(v.first, v.second)) d.push_back(fmt::format("{} {:.10g} against {:.10g}", name, v.first, v.second));
   std::string out;
@@ -211,6 +215,17 @@ MapFile ParseMapFile(const std::vector<uint8_t>& bytes, const std::string& what)
   map.camera.height = static_cast<int>(h);
   map.camera.dist = {rd.Number(cam, "k1", "camera"), rd.Number(cam, "k2", "camera"), rd.Number(cam, "p1", "camera"),
                      rd.Number(cam, "p2", "camera"), rd.Number(cam, "k3", "camera")};
+  // The lens model and k4 came with the fisheye model; a map without them is radial-tangential.
+  if (cam.contains("k4")) map.camera.dist.k4 = rd.Number(cam, "k4", "camera");
+  if (cam.contains("model")) {
+    const json& m = cam["model"];
+    if (!m.is_string()) rd.Fail("camera.model", "is not a string");
+    const std::string model = m.get<std::string>();
+    if (model == ToString(LensModel::kEquidistant))
+      map.camera.dist.model = LensModel::kEquidistant;
+    else if (model != ToString(LensModel::kRadialTangential))
+      rd.Fail("camera.model", fmt::format("'{}' is not a lens model (radial-tangential or equidistant)", model));
+  }
   try {
     map.camera.Check();
   } catch (const std::invalid_argument& e) {

@@ -145,12 +145,17 @@ PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens
 }
 
 void CheckLens(const PinholeCamera& camera, const Distortion& lens) {
-  const double c[5] = {lens.k1, lens.k2, lens.p1, lens.p2, lens.k3};
+  const double c[6] = {lens.k1, lens.k2, lens.p1, lens.p2, lens.k3, lens.k4};
   const auto name = [&] {
-    return fmt::format("lens distortion k1 {} k2 {} p1 {} p2 {} k3 {}", lens.k1, lens.k2, lens.p1, lens.p2, lens.k3);
+    return lens.IsFisheye() ? fmt::format("fisheye lens k1 {} k2 {} k3 {} k4 {}", lens.k1, lens.k2, lens.k3, lens.k4)
+                            : fmt::format("lens distortion k1 {} k2 {} p1 {} p2 {} k3 {}", lens.k1, lens.k2, lens.p1,
+                                          lens.p2, lens.k3);
   };
   for (double v : c)
     if (!std::isfinite(v)) throw std::invalid_argument(name() + ": every coefficient must be finite");
+  if (lens.IsFisheye() && (lens.p1 != 0 || lens.p2 != 0))
+    throw std::invalid_argument(name() + ": the equidistant model has no tangential terms");
+  if (!lens.IsFisheye() && lens.k4 != 0) throw std::invalid_argument(name() + ": k4 is the fisheye model's only");
   if (lens.IsZero()) return;
   // The radial polynomial r (1 + k1 r^2 + k2 r^4 + k3 r^6) must grow from the centre until it reaches the
   // farthest corner's distorted radius (normalised units); past a turn two rays would land on one pixel.
@@ -158,7 +163,13 @@ void CheckLens(const PinholeCamera& camera, const Distortion& lens) {
   for (double u : {0.0, camera.width - 1.0})
     for (double v : {0.0, camera.height - 1.0})
       corner = std::max(corner, camera.PixelToNormalized({u, v}).norm());
+  // The distorted radius of a ray at normalised (pinhole) radius r: the polynomial of r (radial-tangential), or of
+  // the ray's angle theta = atan(r) (equidistant).
   const auto radial = [&](double r) {
+    if (lens.IsFisheye()) {
+      const double t = std::atan(r), t2 = t * t;
+      return t * (1 + t2 * (lens.k1 + t2 * (lens.k2 + t2 * (lens.k3 + t2 * lens.k4))));
+    }
     const double r2 = r * r;
     return r * (1 + r2 * (lens.k1 + r2 * (lens.k2 + r2 * lens.k3)));
   };

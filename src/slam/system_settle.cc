@@ -120,8 +120,10 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   std::string reversal;
   if (FlipIfMirrored(window, &cams, &wp, &reversal)) geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
-  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !self_calibration_.tried &&
-      SelfCalibrate(window, cams, wp, slot)) {
+  // (The radial-tangential k1 only: a fisheye's equidistant model is kept as given, its calibration being part of
+  // any fisheye's setup.)
+  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !camera_.dist.IsFisheye() &&
+      !self_calibration_.tried && SelfCalibrate(window, cams, wp, slot)) {
     // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
     std::vector<Eigen::Vector3d> adjusted = std::move(wp.X);
     wp = CollectWindowPoints(window);

@@ -131,6 +131,9 @@ TEST(CliSynth, BadFlagsFailNamingTheFlag) {
   ExpectRefused("--distortion -0.28 0.07 0 0 0 0", "--distortion");
   ExpectRefused("--distortion nan 0 0 0", "--distortion");
   ExpectRefused("--scenario forward --distortion -0.5 0 0 0", "--distortion");  // turns back inside the image
+  ExpectRefused("--fisheye -0.3 0 0", "--fisheye");                   // 4 coefficients
+  ExpectRefused("--fisheye -0.3 0 0 0 --distortion -0.28 0.07 0 0", "--fisheye");  // one lens
+  ExpectRefused("--fisheye -3 0 0 0", "--fisheye");                    // turns back inside the image
   ExpectRefused("--image-scale 0", "--image-scale");
   ExpectRefused("--image-scale 100", "--image-scale");
   const auto r = RunMcslam("synth --scenario paper --frames 5");

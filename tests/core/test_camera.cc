@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "core/camera.h"
 
 namespace mcslam {
@@ -8,6 +10,14 @@ namespace {
 PinholeCamera DistortedCamera() {
   // Typical webcam-like lens (magnitudes as in TUM fr1 / OpenCV calibrations).
   return PinholeCamera(517.3, 516.5, 318.6, 255.3, 640, 480, Distortion{0.2624, -0.9531, -0.0054, 0.0026, 1.1633});
+}
+
+// A fisheye: TUM-VI's 512x512 camera (the equidistant / Kannala-Brandt model), its corners 62 degrees off the axis.
+PinholeCamera FisheyeCamera() {
+  PinholeCamera c(190.97, 190.97, 254.93, 256.89, 512, 512, Distortion{0.0034, 0.0007, 0, 0, -0.002});
+  c.dist.k4 = 0.0002;
+  c.dist.model = LensModel::kEquidistant;
+  return c;
 }
 
 // Central differences with step h have truncation error O(h^2 * f''') ~ 1e-8 relative for these
@@ -26,7 +36,7 @@ Eigen::Matrix<double, 2, 3> NumericJacobian(F f, const Eigen::Vector3d& x) {
 }
 
 TEST(Camera, ProjectJacobianMatchesFiniteDifferences) {
-  for (const PinholeCamera& cam : {PinholeCamera(500, 500, 160, 120, 320, 240), DistortedCamera()}) {
+  for (const PinholeCamera& cam : {PinholeCamera(500, 500, 160, 120, 320, 240), DistortedCamera(), FisheyeCamera()}) {
     for (const Eigen::Vector3d& p : {Eigen::Vector3d(0.1, -0.2, 2.0), Eigen::Vector3d(-0.5, 0.3, 1.2),
                                      Eigen::Vector3d(0.0, 0.0, 3.0)}) {
       Eigen::Vector2d uv;
@@ -70,35 +80,62 @@ TEST(Camera, WorldAndTranslationJacobiansMatchFiniteDifferences) {
 }
 
 TEST(Camera, DistortionJacobianMatchesFiniteDifferences) {
-  const PinholeCamera cam = DistortedCamera();
-  const Eigen::Vector2d n(0.31, -0.22);
-  Eigen::Matrix2d J;
-  cam.Distort(n, &J);
-  const double h = 1e-7;
-  Eigen::Matrix2d Jn;
-  for (int i = 0; i < 2; ++i) {
-    Eigen::Vector2d a = n, b = n;
-    a[i] += h;
-    b[i] -= h;
-    Jn.col(i) = (cam.Distort(a) - cam.Distort(b)) / (2 * h);
-  }
-  EXPECT_LT((J - Jn).norm(), 1e-6);
+  for (const PinholeCamera& cam : {DistortedCamera(), FisheyeCamera()})
+    for (const Eigen::Vector2d& n : {Eigen::Vector2d(0.31, -0.22), Eigen::Vector2d(1.4, 0.9), Eigen::Vector2d(1e-5, 0)}) {
+      Eigen::Matrix2d J;
+      cam.Distort(n, &J);
+      const double h = 1e-7;
+      Eigen::Matrix2d Jn;
+      for (int i = 0; i < 2; ++i) {
+        Eigen::Vector2d a = n, b = n;
+        a[i] += h;
+        b[i] -= h;
+        Jn.col(i) = (cam.Distort(a) - cam.Distort(b)) / (2 * h);
+      }
+      EXPECT_LT((J - Jn).norm(), 1e-6) << cam.ToString() << " at " << n.transpose();
+    }
+}
+
+// The equidistant model puts a ray theta off the axis at f * theta_d(theta) from the principal point: 45 degrees
+// (n = (1, 0)) with every coefficient 0 lands f * pi / 4 to the right, where a pinhole puts it f * 1.
+TEST(Camera, EquidistantLensPutsARayAtItsAngle) {
+  PinholeCamera cam(200, 200, 250, 250, 500, 500);
+  cam.dist.model = LensModel::kEquidistant;
+  EXPECT_TRUE(cam.HasDistortion());
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(cam.Project(Eigen::Vector3d(1, 0, 1), &uv));
+  EXPECT_NEAR(uv.x(), 250 + 200 * M_PI / 4, 1e-9);
+  EXPECT_NEAR(uv.y(), 250, 1e-12);
+  cam.dist.k1 = 0.1;  // theta_d = theta (1 + 0.1 theta^2)
+  ASSERT_TRUE(cam.Project(Eigen::Vector3d(0, 1, 1), &uv));
+  EXPECT_NEAR(uv.y(), 250 + 200 * (M_PI / 4) * (1 + 0.1 * M_PI * M_PI / 16), 1e-9);
+  // p1, p2 belong to the other model.
+  cam.dist.p1 = 0.01;
+  EXPECT_THROW(cam.Check(), std::invalid_argument);
 }
 
 TEST(Camera, DistortionRoundTripOverTheImage) {
-  const PinholeCamera cam = DistortedCamera();
+  for (const PinholeCamera& cam : {DistortedCamera(), FisheyeCamera()}) {
   double worst = 0;
+  int tried = 0;
   for (int v = 0; v < cam.height; v += 20) {
     for (int u = 0; u < cam.width; u += 20) {
       const Eigen::Vector2d px(u, v);
+      // The fisheye sees 195 degrees: its pixels more than 80 degrees off the axis have no ray [x, y, 1] worth
+      // the name (the System drops their features, kMaxFeatureRayAngleDeg).
+      if (cam.dist.IsFisheye() && cam.PixelToNormalized(px).norm() > 80.0 * M_PI / 180.0) continue;
+      ++tried;
       const Eigen::Vector3d ray = cam.Unproject(px);
       Eigen::Vector2d back;
       ASSERT_TRUE(cam.Project(ray, &back));
       worst = std::max(worst, (back - px).norm());
     }
   }
-  // Gauss-Newton converges quadratically; 1e-9 px is far below any use (features are ~0.1 px).
-  EXPECT_LT(worst, 1e-9);
+  // Gauss-Newton (Newton on theta for the fisheye) converges quadratically; 1e-9 px is far below any use (features
+  // are ~0.1 px).
+  EXPECT_LT(worst, 1e-9) << cam.ToString();
+  EXPECT_GT(tried, 300);
+  }
 }
 
 TEST(Camera, PixelNormalizedRoundTripAndBehindCamera) {

@@ -499,6 +499,32 @@ TEST(Datasets, EurocLayout) {
   EXPECT_EQ(ds2.source->FrameCount(), 3);
 }
 
+// A EuRoC-layout sequence of a fisheye camera (TUM-VI's, Kalibr's `distortion_model: equidistant`): k1-k4 of the
+// Kannala-Brandt model; four coefficients only.
+TEST(Datasets, EurocLayoutWithAnEquidistantFisheye) {
+  TempDir dir;
+  MakeEuroc(dir.path());
+  const fs::path yaml = dir.path() / "mav0" / "cam0" / "sensor.yaml";
+  std::string text = mcslam::testing::ReadText(yaml.string());
+  const std::string radtan = "distortion_model: radial-tangential\n"
+                             "distortion_coefficients: [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]\n";
+  ASSERT_NE(text.find(radtan), std::string::npos);
+  text.replace(text.find(radtan), radtan.size(),
+               "distortion_model: equidistant\ndistortion_coefficients: [0.0034, 0.0007, -0.002, 0.0002]\n");
+  WriteText(yaml.string(), text);
+  Dataset ds = OpenDataset(dir.path().string());
+  ASSERT_TRUE(ds.camera.has_value());
+  EXPECT_EQ(ds.camera->dist.model, LensModel::kEquidistant);
+  EXPECT_EQ(ds.camera->dist.k1, 0.0034);
+  EXPECT_EQ(ds.camera->dist.k3, -0.002);
+  EXPECT_EQ(ds.camera->dist.k4, 0.0002);
+  EXPECT_EQ(ds.camera->dist.p1, 0.0);
+  const std::string four = "[0.0034, 0.0007, -0.002, 0.0002]";
+  text.replace(text.find(four), four.size(), "[0.0034, 0.0007, -0.002, 0.0002, 0.1]");
+  WriteText(yaml.string(), text);
+  EXPECT_THROW(OpenDataset(dir.path().string()), std::exception);
+}
+
 TEST(Datasets, EurocWrongResolutionIsCaught) {
   TempDir dir;
   MakeEuroc(dir.path(), "[752, 480]");

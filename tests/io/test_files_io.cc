@@ -132,6 +132,8 @@ void ExpectSameCamera(const PinholeCamera& a, const PinholeCamera& b) {
   EXPECT_EQ(a.dist.p1, b.dist.p1);
   EXPECT_EQ(a.dist.p2, b.dist.p2);
   EXPECT_EQ(a.dist.k3, b.dist.k3);
+  EXPECT_EQ(a.dist.k4, b.dist.k4);
+  EXPECT_EQ(a.dist.model, b.dist.model);
 }
 
 TEST(CameraYaml, OrbSlam2RoundTrip) {
@@ -206,13 +208,28 @@ ORBextractor.scaleFactor: 1.2
   ExpectSameCamera(cam, expected);
 }
 
-TEST(CameraYaml, RejectsKannalaBrandt) {
+// A fisheye in ORB-SLAM3's form (TUM-VI's calibration: Camera.type KannalaBrandt8, k1-k4 of the equidistant model)
+// and in mcslam's (`model: equidistant`); written back in ORB-SLAM's form, it reads back the same.
+TEST(CameraYaml, ReadsAndWritesTheKannalaBrandtFisheye) {
   TempDir dir;
   WriteText(dir / "fisheye.yaml",
             "%YAML:1.0\nCamera.type: \"KannalaBrandt8\"\nCamera1.fx: 190.97\nCamera1.fy: 190.97\nCamera1.cx: 254.93\n"
             "Camera1.cy: 256.89\nCamera1.k1: 0.0034\nCamera1.k2: 0.0007\nCamera1.k3: -0.002\nCamera1.k4: 0.0002\n"
             "Camera.width: 512\nCamera.height: 512\n");
-  ExpectThrowsWith([&] { ReadCameraYaml(dir / "fisheye.yaml"); }, dir / "fisheye.yaml", "KannalaBrandt8");
+  PinholeCamera expected(190.97, 190.97, 254.93, 256.89, 512, 512, Distortion{0.0034, 0.0007, 0, 0, -0.002});
+  expected.dist.k4 = 0.0002;
+  expected.dist.model = LensModel::kEquidistant;
+  const PinholeCamera cam = ReadCameraYaml(dir / "fisheye.yaml");
+  ExpectSameCamera(cam, expected);
+  WriteCameraYaml(dir / "back.yaml", cam, 20.0);
+  ExpectSameCamera(ReadCameraYaml(dir / "back.yaml"), expected);
+  WriteText(dir / "mcslam.yaml", "model: equidistant\nfx: 190.97\nfy: 190.97\ncx: 254.93\ncy: 256.89\nwidth: 512\n"
+                                 "height: 512\nk1: 0.0034\nk2: 0.0007\nk3: -0.002\nk4: 0.0002\n");
+  ExpectSameCamera(ReadCameraYaml(dir / "mcslam.yaml"), expected);
+  // Another model is refused, naming it.
+  WriteText(dir / "other.yaml", "%YAML:1.0\nCamera.type: \"MEI\"\nCamera.fx: 190\nCamera.fy: 190\nCamera.cx: 250\n"
+                                "Camera.cy: 250\nCamera.width: 512\nCamera.height: 512\n");
+  ExpectThrowsWith([&] { ReadCameraYaml(dir / "other.yaml"); }, dir / "other.yaml", "MEI");
 }
 
 TEST(CameraYaml, ReadsPlainMcslamYaml) {

@@ -97,6 +97,25 @@ TEST(MapFile, RoundTripIsExactToTheByte) {
   EXPECT_EQ(ReadBytes(dir / "a.map"), ReadBytes(dir / "b.map"));
 }
 
+// A fisheye camera keeps its model and k4 (a map of a radial-tangential camera written before them reads as such).
+TEST(MapFile, AFisheyeCameraRoundTrips) {
+  TempDir dir;
+  MapFile m = MakeMap(10, 3);
+  m.camera.dist = Distortion{0.0034, 0.0007, 0, 0, -0.002};
+  m.camera.dist.k4 = 0.0002;
+  m.camera.dist.model = LensModel::kEquidistant;
+  WriteMapFile(dir / "f.map", m);
+  const MapFile back = ReadMapFile(dir / "f.map");
+  ExpectSameMaps(m, back);
+  EXPECT_EQ(back.camera.dist.model, LensModel::kEquidistant);
+  EXPECT_EQ(back.camera.dist.k4, 0.0002);
+  PinholeCamera pinhole = m.camera;
+  pinhole.dist.model = LensModel::kRadialTangential;
+  pinhole.dist.k4 = 0;
+  EXPECT_NE(CameraDifference(m.camera, pinhole).find("lens model equidistant against radial-tangential"),
+            std::string::npos);
+}
+
 TEST(MapFile, AnEmptyMapRoundTrips) {
   TempDir dir;
   const MapFile m = MakeMap(0, 0);

@@ -56,9 +56,15 @@ TEST(System, CleanScenarioFromObservationsAlone) {
 
 // The target on the noisy scenario (σ = 1 px, 10 % wrong matches): mean error ≤ 2 cm and ≤ 1 deg after
 // a Sim(3) alignment, here on 150 frames (past the settling, which ends at frames 83-107 on seeds 1-6) and at
-// 2^16 hypotheses to keep the test short. Seeds 1 and 5: before the settling, the worst (5: 11.7 cm) and the
-// one whose first map came out 1.8x too shallow (1).
+// 2^16 hypotheses to keep the test short. Seeds 1 and 5: before the settling, the worst (5: 11.7 cm) and one whose
+// first map came out 1.8x too shallow (1).
+// Without the settling (settle_parallax_deg 0) the first map's depth errors stay: measured over seeds 1-8
+// (`mcslam run --hypotheses 65536 --gt-scale [--settle-parallax-deg 0]`, 2026-11-28): ATE 1.3-4.5 cm against
+// 0.9-1.0 cm settled, every seed worse (1.3x-4.5x), the scale 1-52 % off (seed 5: 52 %, seed 1: 4 %; seed 1 was
+// 80 % off before the simulator's projection rounded its last bits otherwise: which seed keeps a shallow map is
+// chaotic). Bounds: each seed's unsettled ATE above its settled one, and the worse of the two scales > 20 % off.
 TEST(System, NoisyScenarioMeetsThePapersPrecisionAfterSettling) {
+  double worst_raw_scale_error = 0;
   for (uint64_t seed : {1, 5}) {
     const apps::SequenceInput in = Scenario(150, 1.0, 0.1, seed);
     const apps::SlamRunResult res = RunSystem(in);
@@ -74,17 +80,19 @@ TEST(System, NoisyScenarioMeetsThePapersPrecisionAfterSettling) {
     EXPECT_LT(err.ate_m.mean, 0.02) << "seed " << seed;
     EXPECT_LT(err.rot_deg.mean, 1.0) << "seed " << seed;
     EXPECT_NEAR(err.alignment_result.gt_world_from_est_world.scale, 1.0, 0.1) << "seed " << seed;
-    if (seed == 1) {
-      // Without the settling the same run keeps the shallow first map: its scale is off by far more than 10 %.
-      SystemOptions o = FastOptions();
-      o.init.settle_parallax_deg = 0;
-      const apps::SlamRunResult raw =
-          apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), true);
-      const auto raw_err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(raw.reports, false));
-      EXPECT_GT(std::abs(raw_err.alignment_result.gt_world_from_est_world.scale - 1.0), 0.2);
-      EXPECT_GT(raw_err.ate_m.mean, err.ate_m.mean);
-    }
+    SystemOptions o = FastOptions();
+    o.init.settle_parallax_deg = 0;
+    const apps::SlamRunResult raw =
+        apps::RunSlam(in, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel(), true);
+    const auto raw_err = eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(raw.reports, false));
+    std::printf("seed %llu: ATE %.4f m settled, %.4f m without the settling (scale %.3f)\n",
+                static_cast<unsigned long long>(seed), err.ate_m.mean, raw_err.ate_m.mean,
+                raw_err.alignment_result.gt_world_from_est_world.scale);
+    EXPECT_GT(raw_err.ate_m.mean, err.ate_m.mean) << "seed " << seed;
+    worst_raw_scale_error =
+        std::max(worst_raw_scale_error, std::abs(raw_err.alignment_result.gt_world_from_est_world.scale - 1.0));
   }
+  EXPECT_GT(worst_raw_scale_error, 0.2);
 }
 
 // The same observations through a lens with barrel distortion k1 that the camera file does not declare.
