@@ -89,9 +89,7 @@ void RunSynth(SynthArgs& a) {
   if (a.points_flag->count() > 0) o.num_points = a.points;
   if (!a.lens.empty() || !a.fisheye.empty()) {
     if (!a.fisheye.empty()) {
-      o.lens = Distortion{a.fisheye[0], a.fisheye[1], 0.0, 0.0, a.fisheye[2]};
-      o.lens.k4 = a.fisheye[3];
-      o.lens.model = LensModel::kEquidistant;
+      o.lens = Distortion::Equidistant(a.fisheye[0], a.fisheye[1], a.fisheye[2], a.fisheye[3]);
     } else {
       const auto at = [&](size_t i) { return i < a.lens.size() ? a.lens[i] : 0.0; };
       o.lens = Distortion{at(0), at(1), at(2), at(3), at(4)};

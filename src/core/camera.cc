@@ -169,7 +169,10 @@ Eigen::Vector3d PinholeCamera::Unproject(const Eigen::Vector2d& uv_px) const {
 }
 
 Eigen::Vector2d PinholeCamera::UndistortPixel(const Eigen::Vector2d& uv_px) const {
-  return NormalizedToPixel(Undistort(PixelToNormalized(uv_px)));
+  const Eigen::Vector2d n = Undistort(PixelToNormalized(uv_px));
+  static const double max_r2 = std::pow(std::tan(kMaxPinholeRayAngleDeg * M_PI / 180.0), 2);
+  if (dist.IsFisheye() && n.squaredNorm() > max_r2) return Eigen::Vector2d::Constant(std::nan(""));
+  return NormalizedToPixel(n);
 }
 
 PinholeCamera PinholeCamera::Scaled(double f) const {

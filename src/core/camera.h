@@ -26,6 +26,13 @@ struct Distortion {
     return model == LensModel::kRadialTangential && k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0;
   }
   bool IsFisheye() const { return model == LensModel::kEquidistant; }
+  // The equidistant lens of theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8).
+  static Distortion Equidistant(double k1, double k2, double k3, double k4) {
+    Distortion d;
+    d.k1 = k1, d.k2 = k2, d.k3 = k3, d.k4 = k4;
+    d.model = LensModel::kEquidistant;
+    return d;
+  }
 };
 const char* ToString(LensModel model);
 
@@ -65,7 +72,10 @@ class PinholeCamera {
 
   // Ray through a (distorted) pixel as [x, y, 1] in camera coordinates.
   Eigen::Vector3d Unproject(const Eigen::Vector2d& uv_px) const;
-  // Distorted pixel -> the pixel an ideal pinhole camera with the same K would have seen.
+  // Distorted pixel -> the pixel an ideal pinhole camera with the same K would have seen. The back end works with
+  // such pixels (x/z, y/z): a fisheye's ray more than kMaxPinholeRayAngleDeg off the axis has none worth the name
+  // (tan 90 degrees), and its pixel errors would grow as 1 / cos^2 of the angle: NaN is returned for it.
+  static constexpr double kMaxPinholeRayAngleDeg = 80.0;
   Eigen::Vector2d UndistortPixel(const Eigen::Vector2d& uv_px) const;
 
   bool InImage(const Eigen::Vector2d& uv_px, double border = 0.0) const {

@@ -67,9 +67,12 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
         cv::circle(blocked, cv::Point(cvRound(t.uv.x), cvRound(t.uv.y)), radius, 255, cv::FILLED);
     // A fraction of the frame's strongest response, and no less than what the frame's own noise reaches
     // (FrontendOptions::corner_noise_margin).
-    if (noise_corner_unit < 0) noise_corner_unit = NoiseCornerResponse(o.block_size, o.corner_noise_fraction);
-    const double noise_floor =
-        o.corner_noise_margin * noise_corner_unit * static_cast<double>(st.noise_grey) * static_cast<double>(st.noise_grey);
+    double noise_floor = 0;
+    if (o.corner_noise_margin > 0) {  // the unit noise's response is measured once, where it is used
+      if (noise_corner_unit < 0) noise_corner_unit = NoiseCornerResponse(o.block_size, o.corner_noise_fraction);
+      noise_floor = o.corner_noise_margin * noise_corner_unit * static_cast<double>(st.noise_grey) *
+                    static_cast<double>(st.noise_grey);
+    }
     const float threshold = static_cast<float>(std::max(o.quality_level * max_response, noise_floor));
     // Only cells that can take a new corner or that a remap window touches are searched.
     std::vector<char> search(occupancy.size(), 0);

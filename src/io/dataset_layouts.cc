@@ -217,9 +217,7 @@ EurocCamera ReadEurocSensorYaml(const std::string& path) {
       detail::Fail(path, "key 'distortion_coefficients' must list 4 or 5 numbers (k1 k2 p1 p2 [k3])");
     const auto dc = YamlNumbers(dn, path, "distortion_coefficients", nd);
     if (fisheye) {
-      out.camera.dist = {dc[0], dc[1], 0.0, 0.0, dc[2]};
-      out.camera.dist.k4 = dc[3];
-      out.camera.dist.model = LensModel::kEquidistant;
+      out.camera.dist = Distortion::Equidistant(dc[0], dc[1], dc[2], dc[3]);
     } else {
       out.camera.dist = {dc[0], dc[1], dc[2], dc[3], nd == 5 ? dc[4] : 0.0};
     }

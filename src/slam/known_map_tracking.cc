@@ -26,6 +26,7 @@ void KnownMapTracker::Gather(const FrameObservations& frame) {
     PointObservation o;
     o.point_in_world = points_[it->second];
     o.uv_undistorted_px = camera_.UndistortPixel(f.uv_px);
+    if (!o.uv_undistorted_px.allFinite()) continue;  // not a ray of the pinhole pixels (UndistortPixel)
     o.was_inlier = inlier_flag_[it->second] != 0;
     obs_.push_back(o);
     obs_point_.push_back(it->second);

@@ -34,9 +34,6 @@ namespace {
 
 void Fail(const std::string& what) { throw std::invalid_argument(what); }
 
-// A fisheye's features more than this off the optical axis are not taken (System::Process).
-constexpr double kMaxFeatureRayAngleDeg = 80.0;
-
 // The report of a frame that loses its pose with its map (SystemOptions::restart_min_lost_frames).
 FrameReport DroppedReport(const FrameRecord& f, std::string note) {
   FrameReport r;
@@ -345,12 +342,7 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
   for (const FeatureObservation& f : frame.features) {
     if (!f.uv_px.allFinite()) continue;
     const Eigen::Vector2d uv = camera_.UndistortPixel(f.uv_px);
-    if (!uv.allFinite()) continue;
-    // The back end works with rays as undistorted pixels (x/z, y/z): a fisheye's features far off the axis have
-    // none worth the name (tan 90 degrees), and their pixel errors grow as 1 / cos^2 of the angle.
-    if (camera_.dist.IsFisheye() &&
-        camera_.PixelToNormalized(uv).norm() > std::tan(kMaxFeatureRayAngleDeg * M_PI / 180.0))
-      continue;
+    if (!uv.allFinite()) continue;  // a fisheye's ray too far off the axis for the back end's pinhole pixels
     int64_t id = f.feature_id;
     if (!track_alias_.empty())
       if (auto it = track_alias_.find(id); it != track_alias_.end()) id = it->second, ++aliased;

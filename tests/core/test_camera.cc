@@ -12,12 +12,10 @@ PinholeCamera DistortedCamera() {
   return PinholeCamera(517.3, 516.5, 318.6, 255.3, 640, 480, Distortion{0.2624, -0.9531, -0.0054, 0.0026, 1.1633});
 }
 
-// A fisheye: TUM-VI's 512x512 camera (the equidistant / Kannala-Brandt model), its corners 62 degrees off the axis.
+// A fisheye: TUM-VI's 512x512 camera (the equidistant / Kannala-Brandt model), its image circle ~97 degrees off the
+// axis, its corners ~108.
 PinholeCamera FisheyeCamera() {
-  PinholeCamera c(190.97, 190.97, 254.93, 256.89, 512, 512, Distortion{0.0034, 0.0007, 0, 0, -0.002});
-  c.dist.k4 = 0.0002;
-  c.dist.model = LensModel::kEquidistant;
-  return c;
+  return PinholeCamera(190.97, 190.97, 254.93, 256.89, 512, 512, Distortion::Equidistant(0.0034, 0.0007, -0.002, 0.0002));
 }
 
 // Central differences with step h have truncation error O(h^2 * f''') ~ 1e-8 relative for these
@@ -122,7 +120,7 @@ TEST(Camera, DistortionRoundTripOverTheImage) {
     for (int u = 0; u < cam.width; u += 20) {
       const Eigen::Vector2d px(u, v);
       // The fisheye sees 195 degrees: its pixels more than 80 degrees off the axis have no ray [x, y, 1] worth
-      // the name (the System drops their features, kMaxFeatureRayAngleDeg).
+      // the name (UndistortPixel refuses them, kMaxPinholeRayAngleDeg).
       if (cam.dist.IsFisheye() && cam.PixelToNormalized(px).norm() > 80.0 * M_PI / 180.0) continue;
       ++tried;
       const Eigen::Vector3d ray = cam.Unproject(px);
@@ -136,6 +134,35 @@ TEST(Camera, DistortionRoundTripOverTheImage) {
   EXPECT_LT(worst, 1e-9) << cam.ToString();
   EXPECT_GT(tried, 300);
   }
+}
+
+// The back end works with pinhole pixels: UndistortPixel gives NaN for a fisheye's pixel whose ray is more than
+// kMaxPinholeRayAngleDeg off the axis, and the pinhole pixel of the ray otherwise; a radial-tangential camera's
+// pixels all have one.
+TEST(Camera, AFisheyesRaysFarOffTheAxisHaveNoPinholePixel) {
+  const PinholeCamera fisheye = FisheyeCamera();
+  int beyond = 0, within = 0;
+  for (int i = 0; i < fisheye.width * fisheye.height; i += 7) {  // the corners are ~108 degrees off the axis
+    const Eigen::Vector2d px(i % fisheye.width, i / fisheye.width);
+    const Eigen::Vector2d n = fisheye.Undistort(fisheye.PixelToNormalized(px));
+    const double angle_deg = std::atan(n.norm()) * 180.0 / M_PI;
+    const Eigen::Vector2d pinhole = fisheye.UndistortPixel(px);
+    if (std::abs(angle_deg - PinholeCamera::kMaxPinholeRayAngleDeg) < 1e-6) continue;  // the cut itself
+    if (angle_deg > PinholeCamera::kMaxPinholeRayAngleDeg) {
+      EXPECT_FALSE(pinhole.allFinite()) << px.transpose() << " at " << angle_deg << " deg";
+      ++beyond;
+    } else {
+      ASSERT_TRUE(pinhole.allFinite()) << px.transpose() << " at " << angle_deg << " deg";
+      // The same ray: the pinhole pixel's normalised coordinates are the ray's (rounding only).
+      EXPECT_LT((fisheye.PixelToNormalized(pinhole) - n).norm(), 1e-9 * (1.0 + n.norm()));
+      ++within;
+    }
+  }
+  EXPECT_GT(beyond, 1000);  // TUM-VI's image reaches past the cut towards its corners
+  EXPECT_GT(within, 10000);
+  const PinholeCamera radtan = DistortedCamera();
+  for (int u = 0; u < radtan.width; u += 4)
+    for (int v = 0; v < radtan.height; v += 4) EXPECT_TRUE(radtan.UndistortPixel({u, v}).allFinite()) << u << "," << v;
 }
 
 TEST(Camera, PixelNormalizedRoundTripAndBehindCamera) {

@@ -216,9 +216,8 @@ TEST(CameraYaml, ReadsAndWritesTheKannalaBrandtFisheye) {
             "%YAML:1.0\nCamera.type: \"KannalaBrandt8\"\nCamera1.fx: 190.97\nCamera1.fy: 190.97\nCamera1.cx: 254.93\n"
             "Camera1.cy: 256.89\nCamera1.k1: 0.0034\nCamera1.k2: 0.0007\nCamera1.k3: -0.002\nCamera1.k4: 0.0002\n"
             "Camera.width: 512\nCamera.height: 512\n");
-  PinholeCamera expected(190.97, 190.97, 254.93, 256.89, 512, 512, Distortion{0.0034, 0.0007, 0, 0, -0.002});
-  expected.dist.k4 = 0.0002;
-  expected.dist.model = LensModel::kEquidistant;
+  const PinholeCamera expected(190.97, 190.97, 254.93, 256.89, 512, 512,
+                               Distortion::Equidistant(0.0034, 0.0007, -0.002, 0.0002));
   const PinholeCamera cam = ReadCameraYaml(dir / "fisheye.yaml");
   ExpectSameCamera(cam, expected);
   WriteCameraYaml(dir / "back.yaml", cam, 20.0);

@@ -101,9 +101,7 @@ TEST(MapFile, RoundTripIsExactToTheByte) {
 TEST(MapFile, AFisheyeCameraRoundTrips) {
   TempDir dir;
   MapFile m = MakeMap(10, 3);
-  m.camera.dist = Distortion{0.0034, 0.0007, 0, 0, -0.002};
-  m.camera.dist.k4 = 0.0002;
-  m.camera.dist.model = LensModel::kEquidistant;
+  m.camera.dist = Distortion::Equidistant(0.0034, 0.0007, -0.002, 0.0002);
   WriteMapFile(dir / "f.map", m);
   const MapFile back = ReadMapFile(dir / "f.map");
   ExpectSameMaps(m, back);
