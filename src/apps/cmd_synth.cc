@@ -189,6 +189,10 @@ void RegisterSynth(CLI::App& app) {
                   "resolution (2: the paper's 320x240 becomes 640x480 at f = 1000 px)")
       ->check(FiniteNumber(0, true, 64, "in (0, 64]"))
       ->capture_default_str();
+  cmd->add_option("--hfov", o.hfov_deg,
+                  "The camera's horizontal field of view in degrees (the focal length set to give it, the image size "
+                  "kept): a webcam's or a phone's 60-80 instead of the paper's narrow 35.5. Default: the scenario's")
+      ->check(FiniteNumber(5, false, 150, "in [5, 150]"));
   cmd->add_flag("--render", args->render,
                 "Also write images/NNNNNN.png: the scene's textured surfaces, ray-cast for each frame's pose");
   cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")

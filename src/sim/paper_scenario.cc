@@ -135,11 +135,16 @@ void PaperScenarioOptions::Check() const {
   if (!(std::isfinite(image_scale) && image_scale > 0 && std::lround(kPaperHeightPx * image_scale) >= 8))
     throw std::invalid_argument("image_scale must be > 0, finite and leave an image of at least 8 rows, got " +
                                 Num(image_scale));
-  CheckLens(PaperCamera(), lens);
+  if (!(hfov_deg == 0 || (std::isfinite(hfov_deg) && hfov_deg >= 5 && hfov_deg <= 150)))
+    throw std::invalid_argument("hfov_deg must be 0 (the scenario's own) or in [5, 150] degrees, got " +
+                                Num(hfov_deg));
+  CheckLens(ScenarioCamera(PaperCamera(), {}, image_scale, hfov_deg), lens);
 }
 
-PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale) {
+PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale,
+                             double hfov_deg) {
   PinholeCamera c = image_scale == 1.0 ? camera : camera.Scaled(image_scale);
+  if (hfov_deg != 0) c.fx = c.fy = 0.5 * c.width / std::tan(0.5 * hfov_deg * M_PI / 180.0);
   c.dist = lens;
   return c;
 }
@@ -214,7 +219,7 @@ bool IsPointVisible(const PinholeCamera& camera, const Pose& cam_from_world, con
 SyntheticSequence MakePaperScenario(const PaperScenarioOptions& options) {
   options.Check();
   SyntheticSequence seq;
-  seq.camera = ScenarioCamera(PaperCamera(), options.lens, options.image_scale);
+  seq.camera = ScenarioCamera(PaperCamera(), options.lens, options.image_scale, options.hfov_deg);
   seq.fps = options.fps;
   seq.scene = PaperScene();
   MakeBoxPoints(options.num_points, options.seed, &seq.points_in_world, &seq.normals_in_world);

@@ -57,6 +57,10 @@ struct PaperScenarioOptions {
   // The image's size and focal length scaled together (the same field of view at another resolution), > 0:
   // 2 makes the paper's 320x240 camera 640x480 at f = 1000 px. Users' cameras run from 320x240 to 4K.
   double image_scale = 1.0;
+  // The camera's horizontal field of view in degrees, the focal length set to give it (the image size and the
+  // principal point kept); 0: the scenario's own (the paper's camera sees 35.5 degrees). Users' cameras see
+  // 60-80 degrees (a webcam, a phone, TUM's and 7-Scenes' Kinect, EuRoC, KITTI), where the paper's is narrow.
+  double hfov_deg = 0;
 
   // Throws std::invalid_argument naming the bad field and its value, e.g. "noise_px must be >= 0, got -1".
   void Check() const;
@@ -92,8 +96,10 @@ struct SyntheticSequence {
 // The paper's virtual camera: f = 500 px, 320x240, principal point at the image centre, no distortion.
 PinholeCamera PaperCamera();
 
-// `camera` with `lens` and scaled by `image_scale` (PinholeCamera::Scaled; 1 leaves it bit for bit).
-PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale);
+// `camera` with `lens`, scaled by `image_scale` (PinholeCamera::Scaled; 1 leaves it bit for bit) and, when hfov_deg is
+// not 0, with the focal length (fx = fy) that gives it that horizontal field of view.
+PinholeCamera ScenarioCamera(const PinholeCamera& camera, const Distortion& lens, double image_scale,
+                             double hfov_deg = 0);
 
 // True when the point is seen by the camera: its face faces the camera centre (n . (c - p) > 0, which for a
 // convex box is exact occlusion), its depth exceeds kMinDepthM, and its exact projection is in the image.

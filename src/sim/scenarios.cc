@@ -384,8 +384,9 @@ void ScenarioOptions::Check() const {
   shared.speed = speed;
   shared.num_points = num_points.value_or(info.num_points);
   shared.image_scale = image_scale;
+  shared.hfov_deg = hfov_deg;
   shared.Check();
-  CheckLens(info.camera, lens);
+  CheckLens(ScenarioCamera(info.camera, {}, image_scale, hfov_deg), lens);
   if (shared.frames > MaxFrames())
     throw std::invalid_argument(fmt::format(
         "frames must be at most {} for the {} scenario at speed {} and fps {} (its path ends after {} s of path "
@@ -406,10 +407,11 @@ SyntheticSequence MakeScenario(const ScenarioOptions& options) {
   o.seed = options.seed;
   o.lens = options.lens;
   o.image_scale = options.image_scale;
+  o.hfov_deg = options.hfov_deg;
   if (options.name == "paper") return MakePaperScenario(o);
 
   SyntheticSequence seq;
-  seq.camera = ScenarioCamera(info.camera, options.lens, options.image_scale);
+  seq.camera = ScenarioCamera(info.camera, options.lens, options.image_scale, options.hfov_deg);
   seq.fps = o.fps;
   seq.scene = ScenarioScene(options.name, o.seed);
   SamplePointsOnQuads(seq.scene, o.num_points, o.seed, kStreamPoints, &seq.points_in_world, &seq.normals_in_world);

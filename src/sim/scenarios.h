@@ -69,6 +69,7 @@ struct ScenarioOptions {
   uint64_t seed = 1;
   Distortion lens{};                             // as PaperScenarioOptions: the camera's lens, none by default
   double image_scale = 1.0;                      // as PaperScenarioOptions: the camera's resolution, scaled
+  double hfov_deg = 0;                           // as PaperScenarioOptions: the field of view, 0 the scenario's
 
   // The most frames the scenario's path holds at this speed and fps (INT_MAX when the path never ends).
   int MaxFrames() const;

@@ -299,6 +299,45 @@ TEST(Scenarios, AnImageScaleSeesTheSameSceneAtAnotherResolution) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// A wider field of view, the same image: the focal length that gives it, every point the narrow camera sees seen
+// by the wide one nearer the principal point (by the ratio of the focal lengths), and in a room (rotation's points
+// are all around) more points in view (the paper's box already fills the narrow view).
+TEST(Scenarios, AWiderFieldOfViewSeesMoreOfTheSceneInTheSameImage) {
+  for (const std::string name : {"paper", "rotation", "forward"}) {
+    ScenarioOptions o;
+    o.name = name;
+    o.frames = 5;
+    const SyntheticSequence base = MakeScenario(o);
+    o.hfov_deg = name == "forward" ? 100 : 70;  // the forward camera sees 81.6 degrees of its own
+    const SyntheticSequence wide = MakeScenario(o);
+    EXPECT_EQ(wide.camera.width, base.camera.width);
+    EXPECT_NEAR(2 * std::atan(0.5 * wide.camera.width / wide.camera.fx) * 180 / M_PI, o.hfov_deg, 1e-9);
+    ASSERT_LT(wide.camera.fx, base.camera.fx) << name;
+    EXPECT_EQ(wide.camera.fx, wide.camera.fy);
+    const double ratio = wide.camera.fx / base.camera.fx;
+    size_t seen_base = 0, seen_wide = 0;
+    for (size_t i = 0; i < wide.frames.size(); ++i) {
+      std::map<int64_t, Eigen::Vector2d> at;
+      for (const SyntheticObservation& w : wide.frames[i].observations) at[w.feature_id] = w.uv_px;
+      for (const SyntheticObservation& b : base.frames[i].observations) {
+        const auto it = at.find(b.feature_id);
+        ASSERT_NE(it, at.end()) << name << " frame " << i << ": point " << b.feature_id << " left the wider view";
+        const Eigen::Vector2d c(base.camera.cx, base.camera.cy);
+        EXPECT_LT((it->second - (c + ratio * (b.uv_px - c))).norm(), 1e-9);
+      }
+      seen_base += base.frames[i].observations.size();
+      seen_wide += wide.frames[i].observations.size();
+    }
+    EXPECT_GE(seen_wide, seen_base) << name;
+    if (name == "rotation") EXPECT_GT(seen_wide, seen_base + seen_base / 4);
+  }
+  ScenarioOptions bad;
+  for (double hfov : {-1.0, 4.0, 151.0, std::nan("")}) {
+    bad.hfov_deg = hfov;
+    EXPECT_THROW(bad.Check(), std::invalid_argument) << hfov;
+  }
+}
+
 TEST(Scenarios, ALensThatTurnsBackIsRefusedAndAPointBentBackIntoTheImageIsNotSeen) {
   ScenarioOptions o;
   o.name = "forward";
