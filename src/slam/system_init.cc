@@ -109,6 +109,33 @@ std::optional<Pose> System::PlaceByPnp(int slot, int min_inliers, double min_inl
   return pose;
 }
 
+double detail::EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                                       const Pose& b_from_a) {
+  std::vector<double> off;
+  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    const Eigen::Vector3d ra = b_from_a.R() * a[i];
+    const Eigen::Vector3d n = b_from_a.t.cross(ra);
+    off.push_back(n.norm() > 1e-12 * b_from_a.t.norm() && n.norm() > 0
+                      ? std::asin(std::min(1.0, std::abs(b[i].dot(n.normalized()))))
+                      : std::atan2(ra.cross(b[i]).norm(), ra.dot(b[i])));
+  }
+  return off.empty() ? 0.0 : UpperMedian(off) * 180.0 / M_PI;
+}
+
+bool System::FollowsFrom(int k, const Pose& k_from_world, int next) const {
+  const FrameRecord& fk = map_.frames[k];
+  const FrameRecord& fn = map_.frames[next];
+  std::vector<Eigen::Vector3d> in_k, in_next;
+  for (const FeatureUndistorted& f : fk.features)
+    if (const FeatureUndistorted* g = fn.Find(f.id)) {
+      in_k.push_back(ideal_.PixelToNormalized(f.uv_px).homogeneous().normalized());
+      in_next.push_back(ideal_.PixelToNormalized(g->uv_px).homogeneous().normalized());
+    }
+  if (in_k.size() < kMinTracksToFollow) return true;  // nothing to judge by: as PnP placed it
+  const double limit_deg = std::atan(options_.tracker.inlier_threshold_px / focal_px_) * 180.0 / M_PI;
+  return detail::EpipolarDisagreementDeg(in_k, in_next, fn.cam_from_world * k_from_world.Inverse()) <= limit_deg;
+}
+
 int System::PoseFramesBefore(int before_slot, int first_slot) {
   int first = before_slot;
   for (int k = before_slot - 1; k >= std::max(first_slot, 0); --k) {
@@ -117,6 +144,7 @@ int System::PoseFramesBefore(int before_slot, int first_slot) {
     const std::optional<Pose> pose =
         PlaceByPnp(k, options_.tracker.min_inliers, options_.tracker.min_inlier_ratio);
     if (!pose) break;
+    if (!FollowsFrom(k, *pose, k + 1)) break;
     f.has_pose = true;
     f.cam_from_world = *pose;
     first = k;

@@ -41,6 +41,12 @@ std::vector<int> EvenlySpread(int n, int m);
 // 1 for a constant bias; 0 when no sequence has two entries.
 double PooledLag1Correlation(const std::vector<std::vector<Eigen::Vector2d>>& sequences);
 
+// The median angle (degrees) between each b[i] and the epipolar plane of a[i] under the relative pose b_from_a
+// (the plane through b's centre holding a's centre and the ray of a[i]); the angle to the turned ray itself where
+// the move is nil.
+double EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                               const Pose& b_from_a);
+
 // The mean over `residuals_px` of min(r^2, cap_px^2) (px^2): a window's fit, each wrong match counted at most
 // the cap; infinity for none.
 double CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px);

@@ -153,17 +153,19 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   RefreshInlierFlags(slot);  // at the moved current pose
   // The posed frames left out of the adjustment, and those before the reference: each placed again against
   // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
-  // was first placed with), or else moved with its neighbour in the window: for a frame before the
-  // reference, which stays the world, only the scale changes.
+  // was first placed with, and following the frame after it, which is placed first: System::FollowsFrom), or
+  // else moved with its neighbour in the window: for a frame before the reference, which stays the world, only
+  // the scale changes.
   std::vector<int> left_out;
-  for (int k = posed_from_; k < reference_slot_; ++k) left_out.push_back(k);
+  for (int k = reference_slot_ - 1; k >= posed_from_; --k) left_out.push_back(k);
   for (int k : posed)
     if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
   for (int k : left_out) {
     FrameRecord& f = map_.frames[k];
     const bool before_reference = k < reference_slot_;
-    if (const std::optional<Pose> pose = PlaceByPnp(k, options_.tracker.min_inliers,
-                                                    before_reference ? options_.tracker.min_inlier_ratio : 0.0)) {
+    const std::optional<Pose> pose =
+        PlaceByPnp(k, options_.tracker.min_inliers, before_reference ? options_.tracker.min_inlier_ratio : 0.0);
+    if (pose && (!before_reference || FollowsFrom(k, *pose, k + 1))) {
       f.cam_from_world = *pose;
     } else if (before_reference) {
       f.cam_from_world.t *= s;
