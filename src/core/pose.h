@@ -2,6 +2,8 @@
 // Rigid transforms as unit quaternion + translation. A Pose maps points from frame A to frame B and is
 // named after that: `cam_from_world` maps world points into the camera (the paper's pose, Eq. 1),
 // `world_from_cam` is what trajectory files hold.
+#include <cmath>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -49,5 +51,9 @@ Eigen::Vector3d RotationVectorFromQuaternion(const Eigen::Quaterniond& q);
 constexpr double kPi = 3.14159265358979323846;
 constexpr double DegToRad(double deg) { return deg * kPi / 180.0; }
 constexpr double RadToDeg(double rad) { return rad * 180.0 / kPi; }
+// The angle between two vectors (radians): atan2(|a x b|, a . b), accurate for small angles, unlike acos.
+inline double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b));
+}
 
 }  // namespace mcslam

@@ -12,10 +12,6 @@
 namespace mcslam::geometry {
 namespace {
 
-double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b));  // accurate for small angles, unlike acos
-}
-
 // Inlier flags and their count for a rotation; the sum of squared inlier angles in `sq_sum`.
 int ScoreRotation(const Eigen::Matrix3d& r, std::span<const Eigen::Vector3d> ref,
                   std::span<const Eigen::Vector3d> cam, double threshold_rad, std::vector<uint8_t>* inlier,

@@ -88,8 +88,7 @@ double ParallaxDeg(std::span<const Pose> cam_from_world, const Eigen::Vector3d& 
     const Eigen::Vector3d ray_i = point_in_world - cam_from_world[i].OriginOfTargetInSource();
     for (int j = i + 1; j < n; ++j) {
       const Eigen::Vector3d ray_j = point_in_world - cam_from_world[j].OriginOfTargetInSource();
-      // atan2(|a x b|, a . b) stays accurate for the small angles this check is about (acos does not).
-      best = std::max(best, std::atan2(ray_i.cross(ray_j).norm(), ray_i.dot(ray_j)));
+      best = std::max(best, AngleBetween(ray_i, ray_j));  // accurate for the small angles this check is about
     }
   }
   return RadToDeg(best);

@@ -280,13 +280,14 @@ class System {
   // A frame placed by PnP from a few points of the map (before the reference, or again after a settling) agrees
   // with the posed frame `next` beside it: at the median over the tracks they share, the track's ray in `next` is
   // within the pose step's inlier threshold (PoseTrackerOptions::inlier_threshold_px, as an angle) of its epipolar
-  // plane under the two poses (of the turned ray itself where the two poses share their centre). PnP fits a few points of one face in more than one way: the rendered fast scenario
-  // at 640x480 through 65 degrees with photometric noise (docs/robustness_webcam.md), seed 2, had frames 0-6
-  // placed again after the settling 2.9-4.2 m off from 16-19 points, 13-15 of them PnP inliers (frame 6 turned 53
-  // degrees from frame 7, where the camera turned 9): the run's ATE 75 cm, the frames from the reference on 1-1.5
-  // cm. Those placements were 0.62-1.85 degrees from the planes at the median, right ones 0.004-0.07 (the rendered
-  // fast scenario at 320x240, seeds 1-6, and that run), the limit 0.34 at f = 500 px. True with fewer than
-  // kMinTracksToFollow tracks shared (nothing to judge by).
+  // plane under the two poses (of the turned ray itself where the two poses share their centre). PnP fits a few
+  // points of one face in more than one way: the rendered fast scenario at 640x480 through 65 degrees with
+  // photometric noise (docs/robustness_webcam.md), seed 2, had frames 0-6 placed again after the settling
+  // 2.9-4.2 m off from 16-19 points, 13-15 of them PnP inliers (frame 6 turned 53 degrees from frame 7, where the
+  // camera turned 9): the run's ATE 75 cm, the frames from the reference on 1-1.5 cm. Those placements were
+  // 0.62-1.85 degrees from the planes at the median, right ones 0.004-0.07 (the rendered fast scenario at 320x240,
+  // seeds 1-6, and that run), the limit 0.34 at f = 500 px. True with fewer than kMinTracksToFollow tracks shared
+  // (nothing to judge by).
   bool FollowsFrom(int k, const Pose& k_from_world, int next) const;
   static constexpr size_t kMinTracksToFollow = 8;
   // RANSAC PnP as the pose step judges a point: its inlier threshold, this many inliers at least.

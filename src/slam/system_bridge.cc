@@ -26,7 +26,7 @@ constexpr double kJoinMinMoveOfDepth = 0.05;  // of the map's depth before the t
 constexpr double kJoinMaxScaleRatio = 10.0;
 
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+  return AngleBetween(a, b) * 180.0 / M_PI;
 }
 
 }  // namespace

@@ -76,7 +76,7 @@ System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
     c.n2.push_back(ideal_.PixelToNormalized(f.uv_px));
     c.ids.push_back(f.id);
     const Eigen::Vector3d a = c.n1.back().homogeneous().normalized(), b = c.n2.back().homogeneous().normalized();
-    c.motion_deg.push_back(std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI);
+    c.motion_deg.push_back(AngleBetween(a, b) * 180.0 / M_PI);
   }
   return c;
 }
@@ -114,10 +114,11 @@ double detail::EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, co
   std::vector<double> off;
   for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
     const Eigen::Vector3d ra = b_from_a.R() * a[i];
-    const Eigen::Vector3d n = b_from_a.t.cross(ra);
-    off.push_back(n.norm() > 1e-12 * b_from_a.t.norm() && n.norm() > 0
-                      ? std::asin(std::min(1.0, std::abs(b[i].dot(n.normalized()))))
-                      : std::atan2(ra.cross(b[i]).norm(), ra.dot(b[i])));
+    const Eigen::Vector3d n = b_from_a.t.cross(ra);  // the epipolar plane's normal; nil where the move is
+    const double n_norm = n.norm();
+    off.push_back(n_norm > 0 && n_norm > 1e-12 * b_from_a.t.norm()
+                      ? std::asin(std::min(1.0, std::abs(b[i].dot(n / n_norm))))
+                      : AngleBetween(ra, b[i]));
   }
   return off.empty() ? 0.0 : UpperMedian(off) * 180.0 / M_PI;
 }

@@ -73,7 +73,8 @@ struct InitOptions {
   // Frames before the reference: when the reference moved on while waiting (min_common_features), the
   // frames before it were never posed. After the initialisation each is placed by RANSAC PnP against the
   // new map, newest first, for as long as one is (at least the tracker's min_inliers agreeing, and at least
-  // half of the map points it sees), and placed again after every settling adjustment.
+  // half of the map points it sees, and following the frame after it: System::FollowsFrom), and placed again
+  // after every settling adjustment.
   bool pose_frames_before_reference = true;
   // Self-calibration of the lens' first radial distortion coefficient, once, at the settling's last adjustment
   // (geometry/self_calibration.h, docs/self_calibration.md): at most 40 of the window's frames and their points
