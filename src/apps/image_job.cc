@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -114,6 +115,10 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_flag("--no-relocalise{false}", o->relocalise,
                 "Once lost, only the last pose is searched around (default: the features are also matched to the map "
                 "by their descriptors, and a pose from those restarts the tracking)");
+  cmd->add_flag("--pipelined", o->pipelined,
+                "Run each frame's front end on a thread of its own beside the back end of the frame before (the front "
+                "end then looks for lost points where the frame before the last placed them; docs/timing.md measures "
+                "when it pays)");
   cmd->add_option("--descriptor-refresh-frames", o->frontend.descriptor_refresh_frames,
                   "Front end: a track is described again once its descriptor is this many frames old, so that a lost "
                   "map point is matched with how it looked when last seen (0: birth descriptors only)")
@@ -237,6 +242,7 @@ void ImageRun::Setup(const slam::SystemOptions& system_in) {
   vs_opts.frontend.describe_async = true;  // SIFT of the new tracks runs while the back end estimates the pose
   vs_opts.system = sys_opts;
   vs_opts.relocalise = options.relocalise;
+  vs_opts.pipelined = options.pipelined;
   fe_opts = vs_opts.frontend;
   vslam = std::make_unique<pipeline::VisualSlam>(camera, vs_opts, std::move(pose_kernel), std::move(point_kernel));
   if (options.gt_scale) {
@@ -304,6 +310,63 @@ void ImageRun::RunFrames() {
       }
     }
   };
+  // The frames pushed whose steps have not come back: their rows, start times and images (for the overlay).
+  struct Pending {
+    FrameRow row;
+    Clock::time_point t_frame;
+    cv::Mat image;
+  };
+  std::deque<Pending> pending;
+  auto finish = [&](const pipeline::VisualSlamStep& step) {
+    Pending p = std::move(pending.front());
+    pending.pop_front();
+    FrameRow& row = p.row;
+    const frontend::FrameResult& fr = step.frontend;
+    row.fe = fr.stats;
+    row.features = static_cast<int>(fr.features.size());
+    row.lost_tracks = static_cast<int>(fr.lost.size());
+    row.before_init = step.before_init;
+    row.reloc_tried = step.reloc_tried;
+    row.reloc_matches = step.reloc_matches;
+    row.reloc_inliers = step.reloc_inliers;
+    row.reloc_ms = step.reloc_ms;
+    row.backend_ms = step.backend_ms;
+    if (step.reloc_inliers > 0) {
+      progress.Clear();
+      spdlog::info("frame {}: relocalised from {} of {} features matched to the map{}", row.index, row.reloc_inliers,
+                   row.reloc_matches, step.reloc_near_provisional ? " (near the provisional map's orientation)" : "");
+    }
+    ++frames_processed;
+    const slam::FrameReport* current = nullptr;
+    put_reports(step.reports);
+    if (auto it = report_of_index.find(row.index); it != report_of_index.end()) current = &reports[it->second];
+    if (current) {
+      const bool is_lost = current->status == slam::FrameStatus::kLost;
+      if (is_lost && !was_lost) progress.Clear(), spdlog::warn("frame {} lost: {}", current->index, current->note);
+      if (!is_lost && was_lost && current->status == slam::FrameStatus::kTracked)
+        progress.Clear(), spdlog::info("frame {}: tracking resumed", current->index);
+      was_lost = is_lost;
+    }
+    if (overlay) {
+      if (init_frame) {
+        std::vector<Eigen::Vector3d> pts;
+        for (const slam::MapPoint& pt : vslam->system().map().points())
+          if (pt.state != slam::PointState::kRemoved) pts.push_back(pt.position_in_world);
+        overlay->Anchor(pts);
+      }
+      overlay->SetCamera(vslam->system().camera());
+      overlay->Write(p.image, fr, vslam->system().map(), current);
+    }
+    row.frame_ms = MsSince(p.t_frame);  // the frame's latency: from its decoding to its step
+    const int64_t index = row.index;
+    rows.push_back(std::move(row));
+    progress.Update(frames_processed, index, tracked, lost, vslam->system().map().points().size(),
+                    frames_processed / std::max(elapsed_s(), 1e-9));
+  };
+  // The frame in flight, before a frame's row that must come after it or the end.
+  auto finish_in_flight = [&] {
+    if (std::optional<pipeline::VisualSlamStep> step = vslam->Flush()) finish(*step);
+  };
   try {
     io::Frame frame;
     while (!Interrupted()) {
@@ -327,6 +390,7 @@ void ImageRun::RunFrames() {
                                   camera.width, camera.height),
         frame.image.release();
       if (!frame.ok()) {
+        finish_in_flight();
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, frame.error);
         row.skipped = true;
@@ -337,10 +401,12 @@ void ImageRun::RunFrames() {
         continue;
       }
 
-      pipeline::VisualSlamStep step;
+      std::optional<pipeline::VisualSlamStep> step;
       try {
-        step = vslam->Process(frame.image, frame.index, frame.stamp_s);
+        // Pipelined (VisualSlamOptions::pipelined): the step of the frame before comes back.
+        step = vslam->Push(frame.image, frame.index, frame.stamp_s);
       } catch (const pipeline::UnusableFrame& e) {  // a pixel type the front end does not take: this frame only
+        finish_in_flight();
         progress.Clear();
         spdlog::warn("frame {} ({}) skipped: {}", frame.index, frame.name, e.what());
         row.skipped = true;
@@ -349,51 +415,17 @@ void ImageRun::RunFrames() {
         rows.push_back(std::move(row));
         continue;
       }
-      const frontend::FrameResult& fr = step.frontend;
-      row.fe = fr.stats;
-      row.features = static_cast<int>(fr.features.size());
-      row.lost_tracks = static_cast<int>(fr.lost.size());
-      row.before_init = step.before_init;
-      row.reloc_tried = step.reloc_tried;
-      row.reloc_matches = step.reloc_matches;
-      row.reloc_inliers = step.reloc_inliers;
-      row.reloc_ms = step.reloc_ms;
-      row.backend_ms = step.backend_ms;
-      if (step.reloc_inliers > 0) {
-        progress.Clear();
-        spdlog::info("frame {}: relocalised from {} of {} features matched to the map{}", frame.index, row.reloc_inliers,
-                     row.reloc_matches, step.reloc_near_provisional ? " (near the provisional map's orientation)" : "");
-      }
-      ++frames_processed;
-      const slam::FrameReport* current = nullptr;
-      put_reports(step.reports);
-      if (auto it = report_of_index.find(frame.index); it != report_of_index.end()) current = &reports[it->second];
-      if (current) {
-        const bool is_lost = current->status == slam::FrameStatus::kLost;
-        if (is_lost && !was_lost) progress.Clear(), spdlog::warn("frame {} lost: {}", current->index, current->note);
-        if (!is_lost && was_lost && current->status == slam::FrameStatus::kTracked)
-          progress.Clear(), spdlog::info("frame {}: tracking resumed", current->index);
-        was_lost = is_lost;
-      }
-      if (overlay) {
-        if (init_frame) {
-          std::vector<Eigen::Vector3d> pts;
-          for (const slam::MapPoint& p : vslam->system().map().points())
-            if (p.state != slam::PointState::kRemoved) pts.push_back(p.position_in_world);
-          overlay->Anchor(pts);
-        }
-        overlay->SetCamera(vslam->system().camera());
-        overlay->Write(frame.image, fr, vslam->system().map(), current);
-      }
-      row.frame_ms = MsSince(t_frame);
-      rows.push_back(std::move(row));
-      progress.Update(frames_processed, frame.index, tracked, lost, vslam->system().map().points().size(),
-                      frames_processed / std::max(elapsed_s(), 1e-9));
+      // The frame's own image for the overlay: pipelined, its step comes after the next one was decoded, maybe into
+      // the same buffer.
+      pending.push_back({std::move(row), t_frame,
+                         overlay && vslam->options().pipelined ? frame.image.clone() : frame.image});
+      if (step) finish(*step);
     }
   } catch (const std::exception& e) {
     failure = e.what();  // outputs first, then the error
   }
   try {
+    finish_in_flight();  // a frame whose back end had not run when the loop stopped (no-op after the loop's own)
     put_reports(vslam->Finish());  // the last keyframe's report, revised by its local bundle adjustment
   } catch (const std::exception& e) {
     if (failure.empty()) failure = e.what();

@@ -32,6 +32,9 @@ struct ImageJobOptions {
   // After a lost frame, each frame's features are matched by their SIFT descriptors to the map points whose
   // tracks ended, and a pose that enough of them agree with (RANSAC PnP) restarts the tracking there.
   bool relocalise = true;
+  // --pipelined: the front end of each frame runs beside the back end of the frame before
+  // (pipeline::VisualSlamOptions::pipelined).
+  bool pipelined = false;
   // Map files (io/map_file.h): the map written at the end of the run; a map of an earlier run to start in
   // (relocalised against it, then extended, in its frame and scale).
   std::string save_map_path, load_map_path;

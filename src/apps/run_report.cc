@@ -309,7 +309,8 @@ void ImageRun::WriteReport() {
   j["options"]["image"] = {{"dataset", options.dataset},       {"camera", options.camera_path},
                            {"gt", options.gt_path},            {"format", options.format},
                            {"fps", options.fps},               {"gt_scale", options.gt_scale},
-                           {"relocalise", options.relocalise}, {"overlay", options.overlay_path},
+                           {"relocalise", options.relocalise}, {"pipelined", options.pipelined},
+                           {"overlay", options.overlay_path},
                            {"plot", options.plot_path},        {"viewer", options.viewer}};
   if (!options.load_map_path.empty() || !options.save_map_path.empty()) {
     j["map_files"] = nlohmann::json::object();

@@ -113,6 +113,17 @@ void FrontendOptions::Check() const {
   if (!(remap_ratio > 0 && remap_ratio <= 1)) fail(fmt::format("remap_ratio must be in (0, 1] (got {})", remap_ratio));
 }
 
+void CheckImage(const cv::Mat& image, int64_t index) {
+  if (image.empty()) throw std::invalid_argument(fmt::format("frame {}: empty image", index));
+  if (image.depth() != CV_8U && image.depth() != CV_16U)
+    throw std::invalid_argument(
+        fmt::format("frame {}: unsupported pixel type {} (expected 8- or 16-bit gray, BGR or BGRA)", index,
+                    TypeName(image.type())));
+  if (image.channels() != 1 && image.channels() != 3 && image.channels() != 4)
+    throw std::invalid_argument(fmt::format("frame {}: unsupported pixel type {} (expected 1, 3 or 4 channels)",
+                                            index, TypeName(image.type())));
+}
+
 // ---- Frontend -------------------------------------------------------------------------------------------
 
 Frontend::Frontend(const FrontendOptions& options) {

@@ -231,6 +231,10 @@ struct FrameResult {
   FrameStats stats;
 };
 
+// Throws std::invalid_argument, naming the frame and the pixel type, for an image the front end does not take
+// (empty, or not 8- or 16-bit gray, BGR or BGRA); Frontend::Process checks the same.
+void CheckImage(const cv::Mat& image, int64_t index);
+
 // One thread drives a Frontend (Process, GetDescriptor, Reset, ...); with describe_async the description
 // runs on a TBB task that the Frontend itself joins before anything reads what it writes.
 class Frontend {

@@ -44,32 +44,17 @@ inline std::string TypeName(int type) {
 // 8-bit gray copy of the caller's frame (always a fresh buffer: the description task may still read the
 // previous one, and the caller may reuse its own).
 inline cv::Mat ToGray8(const cv::Mat& image, int64_t index) {
-  if (image.empty()) throw std::invalid_argument(fmt::format("frame {}: empty image", index));
+  CheckImage(image, index);
   cv::Mat img8;
-  if (image.depth() == CV_8U) {
+  if (image.depth() == CV_8U)
     img8 = image;
-  } else if (image.depth() == CV_16U) {
-    image.convertTo(img8, CV_8U, 1.0 / 256.0);
-  } else {
-    throw std::invalid_argument(
-        fmt::format("frame {}: unsupported pixel type {} (expected 8- or 16-bit gray, BGR or BGRA)", index,
-                    TypeName(image.type())));
-  }
+  else
+    image.convertTo(img8, CV_8U, 1.0 / 256.0);  // 16-bit
   cv::Mat gray;
-  switch (img8.channels()) {
-    case 1:
-      gray = img8.clone();
-      break;
-    case 3:
-      cv::cvtColor(img8, gray, cv::COLOR_BGR2GRAY);
-      break;
-    case 4:
-      cv::cvtColor(img8, gray, cv::COLOR_BGRA2GRAY);
-      break;
-    default:
-      throw std::invalid_argument(fmt::format("frame {}: unsupported pixel type {} (expected 1, 3 or 4 channels)",
-                                              index, TypeName(image.type())));
-  }
+  if (img8.channels() == 1)
+    gray = img8.clone();
+  else
+    cv::cvtColor(img8, gray, img8.channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
   return gray;
 }
 

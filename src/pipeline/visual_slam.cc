@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <future>
 #include <map>
 #include <stdexcept>
 #include <tuple>
@@ -24,6 +25,14 @@ bool Removed(const slam::MapPoint* p) { return !p || p->state == slam::PointStat
 // The late tries' counts forget with a half-life of ~140 frames (a run that turns from slow to quick motion
 // stops backing off within a few seconds).
 constexpr double kLateTriesDecay = 0.995;
+
+// Checked; in the pipelined loop the new tracks are described within their frame's front end (which runs beside
+// the back end already; a task of its own would be joined from another thread than the one that started it).
+VisualSlamOptions Prepared(VisualSlamOptions options) {
+  options.Check();
+  if (options.pipelined) options.frontend.describe_async = false;
+  return options;
+}
 
 }  // namespace
 
@@ -60,7 +69,7 @@ VisualSlam::VisualSlam(const PinholeCamera& camera, VisualSlamOptions options,
                        std::unique_ptr<compute::PoseKernel> pose_kernel,
                        std::unique_ptr<compute::PointKernel> point_kernel)
     : given_camera_(camera),
-      options_((options.Check(), std::move(options))),
+      options_(Prepared(std::move(options))),
       frontend_(options_.frontend),
       system_(camera, options_.system, std::move(pose_kernel), std::move(point_kernel)) {}
 
@@ -72,9 +81,13 @@ void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
         first_descriptors_.emplace(f.feature_id, *d);
 }
 
-std::vector<slam::FrameReport> VisualSlam::Finish() { return system_.Finish(); }
+std::vector<slam::FrameReport> VisualSlam::Finish() {
+  if (in_flight_) throw std::logic_error("VisualSlam::Finish: a frame is in flight (Flush first)");
+  return system_.Finish();
+}
 
 io::MapFile VisualSlam::ExportMap() {
+  if (in_flight_) throw std::logic_error("VisualSlam::ExportMap: a frame is in flight (Flush first)");
   system_.Flush();  // nothing is pending after Finish; a caller that did not call it loses only the report
   io::MapFile out;
   out.camera = system_.camera();  // with its k1 self-calibrated, if it was
@@ -211,38 +224,65 @@ void VisualSlam::CountRemapTries(std::span<const frontend::RemapRequest> request
   }
 }
 
-VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double stamp_s) {
-  VisualSlamStep step;
-  ++frames_processed_;
-  const std::vector<frontend::RemapRequest> requests = RemapRequests();
+void VisualSlam::SkipFrame() {
+  if (in_flight_) throw std::logic_error("VisualSlam::SkipFrame: a frame is in flight (Flush first)");
+  after_gap_ = true;
+  ++frames_processed_;  // and remapping tries the points in view afresh
+}
+
+void VisualSlam::CheckImage(const cv::Mat& image, int64_t index) {
   try {
-    step.frontend = frontend_.Process(image, index, stamp_s, requests);
+    frontend::CheckImage(image, index);
+    if (!image_size_.empty() && image.size() != image_size_)
+      throw std::invalid_argument(fmt::format("frame {}: image is {}x{} but the previous frames were {}x{}", index,
+                                              image.cols, image.rows, image_size_.width, image_size_.height));
+  } catch (const std::invalid_argument& e) {
+    after_gap_ = true;
+    throw UnusableFrame(e.what());
+  }
+  image_size_ = image.size();
+}
+
+frontend::FrameResult VisualSlam::RunFrontend(const cv::Mat& image, int64_t index, double stamp_s,
+                                              std::span<const frontend::RemapRequest> requests) {
+  try {
+    return frontend_.Process(image, index, stamp_s, requests);
   } catch (const std::invalid_argument& e) {  // a pixel type the front end does not take: this frame only
     after_gap_ = true;
     throw UnusableFrame(e.what());
   }
-  const frontend::FrameResult& fr = step.frontend;
+}
+
+void VisualSlam::AfterFrontend(const frontend::FrameResult& fr, std::span<const frontend::RemapRequest> requests) {
   for (const frontend::LostTrack& t : fr.lost)
     if (t.descriptor && !Removed(system_.map().Find(t.feature_id))) lost_descriptors_[t.feature_id] = *t.descriptor;
   for (int64_t id : fr.remapped_ids) lost_descriptors_.erase(id);
   CountRemapTries(requests, fr);
+}
 
+FrameObservations VisualSlam::BeforeBackend(bool after_gap, VisualSlamStep* step) {
   // The last keyframe's local bundle adjustment (local_ba_async) was solved while the front end ran: applied
   // before the map is matched or tracked against (its revised report comes with the System's next reports).
   system_.ApplyPendingAdjustment();
-  step.before_init = !system_.initialised();
-  FrameObservations obs = frontend::ToObservations(fr);
+  step->before_init = !system_.initialised();
+  FrameObservations obs = frontend::ToObservations(step->frontend);
   // While the System tracks a provisional map (a bridge over the unmapped), every frame is also matched against
   // the map it must join.
-  if (options_.relocalise && (was_lost_ || after_gap_ || system_.bridging()) && system_.initialised()) {
+  if (options_.relocalise && (was_lost_ || after_gap || system_.bridging()) && system_.initialised()) {
     const auto t_reloc = Clock::now();
-    Relocalise(fr, &obs, &step);
-    step.reloc_ms = MsSince(t_reloc);
+    Relocalise(step->frontend, &obs, step);
+    step->reloc_ms = MsSince(t_reloc);
   }
-  after_gap_ = false;
+  return obs;
+}
+
+void VisualSlam::RunBackend(const FrameObservations& obs, VisualSlamStep* step) {
   const auto t_backend = Clock::now();
-  step.reports = system_.Process(obs);
-  step.backend_ms = MsSince(t_backend);
+  step->reports = system_.Process(obs);
+  step->backend_ms = MsSince(t_backend);
+}
+
+void VisualSlam::AfterBackend(const FrameObservations& obs, VisualSlamStep* step, frontend::FrameResult* next) {
   if (system_.restarts() != restarts_seen_) {  // the map was dropped: what was kept of its points goes with it
     restarts_seen_ = system_.restarts();
     lost_descriptors_.clear();
@@ -254,18 +294,82 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
     latest_inliers_ = 0;
   }
   // Tracks the System took as older map points (a place seen again): they go on under the points' ids, with
-  // their own descriptors (this view's).
-  for (const auto& [track, point] : system_.merged_tracks())
-    if (frontend_.Relabel(track, point)) {  // else the System goes on renaming the track's features
+  // their own descriptors (this view's). A next frame already through the front end reports them under their
+  // tracks' ids: renamed there too (a track that ended in it leaves its descriptor to the point).
+  for (const auto& [track, point] : system_.merged_tracks()) {
+    bool ended_next = false;
+    if (next) {
+      for (frontend::TrackedFeature& f : next->features)
+        if (f.feature_id == track) f.feature_id = point;
+      for (frontend::LostTrack& t : next->lost)
+        if (t.feature_id == track) t.feature_id = point, ended_next = true;
+    }
+    if (frontend_.Relabel(track, point) || ended_next) {  // else the System goes on renaming the track's features
       lost_descriptors_.erase(point);
       remap_tries_.erase(point);
     }
+  }
   KeepFirstLooks(obs);
-  if (const slam::FrameReport* current = step.current()) {
+  if (const slam::FrameReport* current = step->current()) {
     if (current->has_pose) latest_cam_from_world_ = current->cam_from_world, latest_inliers_ = current->inliers;
     was_lost_ = current->status == slam::FrameStatus::kLost;
   }
+}
+
+VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double stamp_s) {
+  if (in_flight_) throw std::logic_error("VisualSlam::Process: a frame is in flight (Flush first)");
+  VisualSlamStep step;
+  ++frames_processed_;
+  const std::vector<frontend::RemapRequest> requests = RemapRequests();
+  step.frontend = RunFrontend(image, index, stamp_s, requests);
+  AfterFrontend(step.frontend, requests);
+  const FrameObservations obs = BeforeBackend(after_gap_, &step);
+  after_gap_ = false;
+  RunBackend(obs, &step);
+  AfterBackend(obs, &step, nullptr);
   return step;
+}
+
+std::optional<VisualSlamStep> VisualSlam::Push(const cv::Mat& image, int64_t index, double stamp_s) {
+  if (!options_.pipelined) return Process(image, index, stamp_s);
+  CheckImage(image, index);
+  std::optional<InFlight> done = std::move(in_flight_);
+  in_flight_.reset();
+  FrameObservations obs;
+  if (done) {
+    AfterFrontend(done->step.frontend, done->requests);
+    obs = BeforeBackend(done->after_gap, &done->step);
+  }
+  InFlight next;
+  ++frames_processed_;
+  next.requests = RemapRequests();  // as of the back end of the frame before the one in flight
+  next.after_gap = std::exchange(after_gap_, false);
+  // The front end touches only the Frontend; the back end only the System and this object's remapping state.
+  std::future<frontend::FrameResult> front = std::async(std::launch::async, [&] {
+    return frontend_.Process(image, index, stamp_s, next.requests);
+  });
+  try {
+    if (done) RunBackend(obs, &done->step);
+  } catch (...) {
+    front.wait();
+    throw;
+  }
+  next.step.frontend = front.get();
+  if (done) AfterBackend(obs, &done->step, &next.step.frontend);
+  in_flight_ = std::move(next);
+  if (!done) return std::nullopt;
+  return std::move(done->step);
+}
+
+std::optional<VisualSlamStep> VisualSlam::Flush() {
+  if (!in_flight_) return std::nullopt;
+  InFlight done = std::move(*in_flight_);
+  in_flight_.reset();
+  AfterFrontend(done.step.frontend, done.requests);
+  const FrameObservations obs = BeforeBackend(done.after_gap, &done.step);
+  RunBackend(obs, &done.step);
+  AfterBackend(obs, &done.step, nullptr);
+  return std::move(done.step);
 }
 
 // The features of this frame that are no map point (tracks born since the loss) matched by their descriptors

@@ -8,6 +8,7 @@
 //   matched tracks go on under their map points' ids, and the Monte Carlo pose step starts from that pose.
 // The application around it reads frames, writes files and reports progress; it does no SLAM.
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <optional>
 #include <span>
@@ -66,6 +67,13 @@ struct VisualSlamOptions {
   // points, whose median distance is ~520 on the shared sequences) keeps the matches a changed view pushed
   // past 250.
   double relocalisation_max_distance = 400.0;
+  // The pipelined frame loop (VisualSlam::Push): the front end of each frame runs on a thread of its own while
+  // the back end works on the frame before it. What the front end takes from the back end (the lost points to look
+  // for, projected with the latest pose) is then one frame older: the back end of the frame before has not ended.
+  // The new tracks are then described within their frame's front end (FrontendOptions::describe_async is off).
+  // Off by default: on 2 cores both stages already keep both cores busy (TBB), and overlapping them made each
+  // slower by more than it saved (docs/timing.md: 7-Scenes 22.1 against 24.5 frames/s sequential).
+  bool pipelined = false;
   // Throws std::invalid_argument naming the field.
   void Check() const;
 };
@@ -101,14 +109,22 @@ class VisualSlam {
   // does not take the image's pixel type: nothing has changed then but that the next frame counts as coming
   // after a gap. Other exceptions (the System's) propagate.
   VisualSlamStep Process(const cv::Mat& image, int64_t index, double stamp_s);
+  // The pipelined frame loop (VisualSlamOptions::pipelined; without it, Process): starts this frame's front end
+  // and, meanwhile, runs the back end of the frame before, whose step it returns (nullopt for the first frame).
+  // The frame in flight comes back with the next Push or with Flush. Throws UnusableFrame, before anything else,
+  // for an image the front end does not take (the frame in flight stays in flight).
+  std::optional<VisualSlamStep> Push(const cv::Mat& image, int64_t index, double stamp_s);
+  // The back end of the frame in flight, if any: before SkipFrame, Finish, ExportMap or reading the map as of the
+  // last frame pushed.
+  std::optional<VisualSlamStep> Flush();
+  bool in_flight() const { return in_flight_.has_value(); }
+
   // After the last frame: the reports that the System still holds back (MappingOptions::local_ba_async: the last
   // keyframe's, revised by its local bundle adjustment). Call it before reading the final map.
   std::vector<slam::FrameReport> Finish();
   // A frame that could not be read: the camera may have moved far meanwhile, so the next frame is relocalised.
-  void SkipFrame() {
-    after_gap_ = true;
-    ++frames_processed_;  // and remapping tries the points in view afresh
-  }
+  // Throws std::logic_error while a frame is in flight (Flush first).
+  void SkipFrame();
 
   // The map as a map file holds it (io/map_file.h; its options are the caller's to fill in): the points in
   // the map, each with its SIFT descriptor when one is known (its live track's, or the one kept since its track
@@ -131,6 +147,17 @@ class VisualSlam {
   // After the front end: the requests not re-attached count as failed tries.
   void CountRemapTries(std::span<const frontend::RemapRequest> requests, const frontend::FrameResult& fr);
   void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step);
+  // The stages of one frame, in the order Process runs them; Push runs the front end of the next frame between
+  // BeforeBackend and the System's Process, and AfterBackend renames the tracks the System merged in that frame's
+  // result too (`next`).
+  frontend::FrameResult RunFrontend(const cv::Mat& image, int64_t index, double stamp_s,
+                                    std::span<const frontend::RemapRequest> requests);
+  void AfterFrontend(const frontend::FrameResult& fr, std::span<const frontend::RemapRequest> requests);
+  FrameObservations BeforeBackend(bool after_gap, VisualSlamStep* step);
+  void RunBackend(const FrameObservations& obs, VisualSlamStep* step);
+  void AfterBackend(const FrameObservations& obs, VisualSlamStep* step, frontend::FrameResult* next);
+  // The checks of Push on a new image (UnusableFrame).
+  void CheckImage(const cv::Mat& image, int64_t index);
   // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
   void KeepFirstLooks(const FrameObservations& obs);
 
@@ -158,6 +185,14 @@ class VisualSlam {
   bool was_lost_ = false;
   int restarts_seen_ = 0;  // System::restarts() after the last Process
   bool after_gap_ = false;  // frames were skipped since the last one processed
+  cv::Size image_size_;     // of the first frame taken
+  // The frame whose front end ran and whose back end has not (Push).
+  struct InFlight {
+    VisualSlamStep step;  // with its front end's result
+    std::vector<frontend::RemapRequest> requests;
+    bool after_gap = false;
+  };
+  std::optional<InFlight> in_flight_;
 };
 
 }  // namespace mcslam::pipeline
