@@ -19,7 +19,10 @@ summary() {  # file, label
     "$(field last_over_first "$1")" "$(field rss_first_mib "$1")" "$(field rss_last_mib "$1")" \
     "$(field rss_peak_mib "$1")" "$(field ate_over_path "$1")"
 }
-table() { grep -v '^#' "$1" | grep -v '^bench soak' | awk 'NR == 1 { print "| " $1 " | " $2 " | " $3 " | " $4 " | " $5 " | " $6 " | " $7 " |"; print "|---|---|---|---|---|---|---|"; next } { print "| " $1 " | " $2 " | " $3 " | " $4 " | " $5 " | " $6 " | " $7 " |" }'; }
+table() {  # every column of the soak's windows (the parts of a frame are 0 with observations: not measured there)
+  grep -v '^#' "$1" | grep -v '^bench soak' | awk '{ line = "|"; for (i = 1; i <= NF; ++i) line = line " " $i " |"; print line
+    if (NR == 1) { sep = "|"; for (i = 1; i <= NF; ++i) sep = sep "---|"; print sep } }'
+}
 {
   echo "# Long runs: time and memory over $FRAMES frames"
   echo
@@ -36,7 +39,8 @@ table() { grep -v '^#' "$1" | grep -v '^bench soak' | awk 'NR == 1 { print "| " 
   summary "$WORK/images.txt" "rendered images"
   summary "$WORK/observations.txt" "observations"
   echo
-  echo "Window by window, rendered images (ms a frame, resident memory in MiB):"
+  echo "Window by window, rendered images (ms a frame, resident memory in MiB; the medians of the front end, of its"
+  echo "remapping where it had requests, of the back end, and of the remap requests a frame):"
   echo
   table "$WORK/images.txt"
   echo

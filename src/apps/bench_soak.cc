@@ -54,6 +54,9 @@ struct Window {
   double median_ms = 0, p95_ms = 0;
   int tracked = 0, map_points = 0;
   double rss_mib = 0;
+  // Medians of the parts of a frame (rendered images only; 0 otherwise): the front end, its remapping (frames
+  // with requests), the back end; and the remap requests a frame.
+  double frontend_ms = 0, remap_ms = 0, backend_ms = 0, remap_requests = 0;
 };
 
 void BenchSoak(const SoakArgs& a) {
@@ -89,13 +92,14 @@ void BenchSoak(const SoakArgs& a) {
              "{}\n",
              a.scenario, a.seed, a.frames, a.observations ? "observations to the back end" : "rendered images",
              a.backend, a.observations ? "nothing" : "rendering");
-  fmt::print("{:>6} {:>6} {:>12} {:>10} {:>8} {:>11} {:>9}\n", "first", "last", "median_ms", "p95_ms", "tracked",
-             "map_points", "rss_mib");
+  fmt::print("{:>6} {:>6} {:>12} {:>10} {:>8} {:>11} {:>9} {:>12} {:>9} {:>11} {:>15}\n", "first", "last",
+             "median_ms", "p95_ms", "tracked", "map_points", "rss_mib", "frontend_ms", "remap_ms", "backend_ms",
+             "remap_requests");
 
   InstallInterruptHandler();
   std::map<int64_t, Pose> posed;  // index -> cam_from_world, the latest report's
   std::vector<Window> windows;
-  std::vector<double> ms;
+  std::vector<double> ms, fe_ms, remap_ms, be_ms, requests;
   Window w;
   double render_ms_sum = 0;
   int tracked_all = 0, done = 0;
@@ -116,6 +120,10 @@ void BenchSoak(const SoakArgs& a) {
       render_ms_sum += std::chrono::duration<double, std::milli>(t0 - r0).count();
       pipeline::VisualSlamStep step = vslam->Process(image, i, seq.stamps_s[static_cast<size_t>(i)]);
       ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      fe_ms.push_back(step.frontend.stats.total_ms);
+      if (step.frontend.stats.remap_requests > 0) remap_ms.push_back(step.frontend.stats.remap_ms);
+      be_ms.push_back(step.backend_ms);
+      requests.push_back(step.frontend.stats.remap_requests);
       reports = std::move(step.reports);
       w.map_points = vslam->system().map().CountInState(slam::PointState::kActive) +
                      vslam->system().map().CountInState(slam::PointState::kLost);
@@ -131,8 +139,15 @@ void BenchSoak(const SoakArgs& a) {
       w.median_ms = UpperMedian(ms);
       w.p95_ms = Quantile(ms, 0.95);
       w.rss_mib = ProcStatusMiB("VmRSS:").value_or(0);
-      fmt::print("{:>6} {:>6} {:>12.3f} {:>10.3f} {:>8} {:>11} {:>9.1f}\n", w.first, w.last, w.median_ms, w.p95_ms,
-                 w.tracked, w.map_points, w.rss_mib);
+      auto median = [](const std::vector<double>& v) { return v.empty() ? 0.0 : UpperMedian(v); };
+      w.frontend_ms = median(fe_ms);
+      w.remap_ms = median(remap_ms);
+      w.backend_ms = median(be_ms);
+      w.remap_requests = median(requests);
+      fe_ms.clear(), remap_ms.clear(), be_ms.clear(), requests.clear();
+      fmt::print("{:>6} {:>6} {:>12.3f} {:>10.3f} {:>8} {:>11} {:>9.1f} {:>12.3f} {:>9.3f} {:>11.3f} {:>15.0f}\n",
+                 w.first, w.last, w.median_ms, w.p95_ms, w.tracked, w.map_points, w.rss_mib, w.frontend_ms,
+                 w.remap_ms, w.backend_ms, w.remap_requests);
       std::fflush(stdout);
       windows.push_back(w);
       w = Window{};
@@ -164,10 +179,11 @@ void BenchSoak(const SoakArgs& a) {
   if (!a.csv.empty()) {
     std::ofstream f(a.csv);
     if (!f) throw std::runtime_error(fmt::format("cannot write '{}'", a.csv));
-    f << "first,last,median_ms,p95_ms,tracked,map_points,rss_mib\n";
+    f << "first,last,median_ms,p95_ms,tracked,map_points,rss_mib,frontend_ms,remap_ms,backend_ms,remap_requests\n";
     for (const Window& x : windows)
-      f << fmt::format("{},{},{:.4f},{:.4f},{},{},{:.2f}\n", x.first, x.last, x.median_ms, x.p95_ms, x.tracked,
-                       x.map_points, x.rss_mib);
+      f << fmt::format("{},{},{:.4f},{:.4f},{},{},{:.2f},{:.4f},{:.4f},{:.4f},{:.0f}\n", x.first, x.last, x.median_ms,
+                       x.p95_ms, x.tracked, x.map_points, x.rss_mib, x.frontend_ms, x.remap_ms, x.backend_ms,
+                       x.remap_requests);
     if (!f) throw std::runtime_error(fmt::format("error while writing '{}'", a.csv));
   }
   if (Interrupted()) throw InterruptedError();

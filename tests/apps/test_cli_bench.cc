@@ -112,6 +112,20 @@ TEST(CliBench, SoakPrintsEachWindowAndTheLastAgainstTheFirst) {
   // The noise-free scenario's trajectory is right to far better than 1 % of its path (measured 0.04 % on
   // the rendered run of 600 frames; observations are exact here).
   EXPECT_LT(Field(r.output, "ate_over_path"), 0.01) << r.output;
+  // The parts of a frame are measured with images only: zeros here.
+  for (const char* part : {"frontend_ms", "remap_ms", "backend_ms", "remap_requests"})
+    for (const std::string& v : testing::CsvColumn(dir / "w.csv", part)) EXPECT_EQ(std::stod(v), 0.0) << part;
+  // Rendered images: a window once the map is made has a front end and a back end, and its remapping is part of
+  // its front end's time.
+  const auto images = RunMcslam("bench soak --frames 90 --window 30 --csv " + dir / "i.csv");
+  ASSERT_EQ(images.exit_code, 0) << images.output;
+  const std::vector<std::string> fe = testing::CsvColumn(dir / "i.csv", "frontend_ms");
+  const std::vector<std::string> be = testing::CsvColumn(dir / "i.csv", "backend_ms");
+  const std::vector<std::string> remap = testing::CsvColumn(dir / "i.csv", "remap_ms");
+  ASSERT_EQ(fe.size(), 3u);
+  EXPECT_GT(std::stod(fe[2]), 0.0);
+  EXPECT_GT(std::stod(be[2]), 0.0);
+  EXPECT_LE(std::stod(remap[2]), std::stod(fe[2]));
   const auto bad = RunMcslam("bench soak --frames 50 --window 100");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("--window 100 is longer than --frames 50"), std::string::npos) << bad.output;
