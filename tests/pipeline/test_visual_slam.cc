@@ -39,9 +39,11 @@ struct Scene {
   sim::SyntheticSequence seq;
   sim::SceneRenderer renderer{sim::RenderOptions{}};
   Scene(int frames, uint64_t seed) : seq(PaperScene(frames, seed)) {}
-  // A scenario of the zoo rendered as `mcslam synth --scenario NAME --seed SEED --render` renders it.
-  Scene(const std::string& name, uint64_t seed, double image_scale = 1.0)
-      : seq(Scenario(name, seed, image_scale)), renderer(seq.scene, Textures(seed)) {}
+  // A scenario of the zoo rendered as `mcslam synth --scenario NAME --seed SEED --render` renders it (with
+  // `--exposure-step` and `--blur-sigma` when given).
+  Scene(const std::string& name, uint64_t seed, double image_scale = 1.0, double exposure_step = 1.0,
+        double blur_sigma_px = 0.0)
+      : seq(Scenario(name, seed, image_scale)), renderer(seq.scene, Textures(seed, exposure_step, blur_sigma_px)) {}
   static sim::SyntheticSequence Scenario(const std::string& name, uint64_t seed, double image_scale) {
     sim::ScenarioOptions so;
     so.name = name;
@@ -49,9 +51,11 @@ struct Scene {
     so.image_scale = image_scale;
     return sim::MakeScenario(so);
   }
-  static sim::RenderOptions Textures(uint64_t seed) {
+  static sim::RenderOptions Textures(uint64_t seed, double exposure_step = 1.0, double blur_sigma_px = 0.0) {
     sim::RenderOptions ro;
     ro.seed = seed;
+    ro.exposure_step = exposure_step;
+    ro.blur_sigma_px = blur_sigma_px;
     return ro;
   }
   cv::Mat Frame(int i) const {
@@ -301,6 +305,35 @@ TEST(VisualSlam, AWeakPoseInAPureTurnIsTakenAsTheTurn) {
   EXPECT_GT(on.turns, off.turns);
   EXPECT_LT(on.ate_m, off.ate_m);
   EXPECT_LT(on.ate_m, 0.005 * 3.29);  // the scenario's path, 3.29 m (robustness matrix)
+}
+
+// The point adjustment's outliers are a few points at a time; more than half of a keyframe's map points at once
+// are a window whose poses disagree (System::AdjustPoints). The rendered rotation scenario with exposure steps
+// and blur (`mcslam synth --scenario rotation --seed 2 --render --exposure-step 1.3 --blur-sigma 2`): after its
+// provisional map joined the map, the frames the local adjustment had stepped over were ~7 px off the points it
+// moved, and 49 of the 79 points of frame 210 were removed at once; the run then drifted on 13-20 inliers (ATE
+// 15.0 cm through `mcslam run`; 10.5 cm with the points kept). Measured here: the points kept on 1 frame, no
+// keyframe losing more than 17, all 270 frames posed, ATE 2.8 cm; without keeping them, 51 points left at once
+// and 54 frames went without a pose (ATE 3.5 cm over the 216 posed). Bounds: no keyframe loses more than half of
+// the points it scored, at least 265 frames posed, the ATE under the 15 cm of the CLI run that lost them.
+TEST(VisualSlam, AKeyframeDoesNotLoseMostOfItsPointsAtOnce) {
+  const Scene scene("rotation", 2, 1.0, 1.3, 2.0);
+  const Reports reports = RunWhole(scene, VisualSlamOptions{});
+  int kept = 0, worst_removed = 0;
+  for (const auto& [i, r] : reports) {
+    kept += r.note.find("would have left the map at once") != std::string::npos;
+    worst_removed = std::max(worst_removed, r.removed);
+    if (r.scored > 0) EXPECT_LE(2 * r.removed, r.scored + r.removed) << "frame " << i << ": " << r.note;
+  }
+  double sum_sq = 0;
+  const std::map<int64_t, double> errors = ErrorsAfterAlignment(scene, reports);
+  for (const auto& [i, e] : errors) sum_sq += e * e;
+  const double ate = errors.empty() ? 1e9 : std::sqrt(sum_sq / static_cast<double>(errors.size()));
+  std::printf("[ kept     ] points kept on %d frames; at most %d removed at once; ATE %.4f m over %zu frames\n", kept,
+              worst_removed, ate, errors.size());
+  EXPECT_GE(kept, 1);  // not vacuous: the guard acted
+  EXPECT_GE(errors.size(), 265u);
+  EXPECT_LT(ate, 0.15);
 }
 
 TEST(VisualSlam, AnImageTheFrontEndDoesNotTakeSkipsThatFrameOnly) {
