@@ -117,8 +117,8 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
                 "by their descriptors, and a pose from those restarts the tracking)");
   cmd->add_flag("--pipelined", o->pipelined,
                 "Run each frame's front end on a thread of its own beside the back end of the frame before (the front "
-                "end then looks for lost points where the frame before the last placed them; docs/timing.md measures "
-                "when it pays)");
+                "end then looks for lost points where the frame before the last placed them; slower on two cores: "
+                "docs/timing_pipelined.md)");
   cmd->add_option("--descriptor-refresh-frames", o->frontend.descriptor_refresh_frames,
                   "Front end: a track is described again once its descriptor is this many frames old, so that a lost "
                   "map point is matched with how it looked when last seen (0: birth descriptors only)")
@@ -425,7 +425,7 @@ void ImageRun::RunFrames() {
     failure = e.what();  // outputs first, then the error
   }
   try {
-    finish_in_flight();  // a frame whose back end had not run when the loop stopped (no-op after the loop's own)
+    finish_in_flight();  // the frame whose back end had not run when the loop stopped
     put_reports(vslam->Finish());  // the last keyframe's report, revised by its local bundle adjustment
   } catch (const std::exception& e) {
     if (failure.empty()) failure = e.what();

@@ -316,18 +316,22 @@ void VisualSlam::AfterBackend(const FrameObservations& obs, VisualSlamStep* step
   }
 }
 
+VisualSlamStep VisualSlam::Complete(InFlight frame) {
+  AfterFrontend(frame.step.frontend, frame.requests);
+  const FrameObservations obs = BeforeBackend(frame.after_gap, &frame.step);
+  RunBackend(obs, &frame.step);
+  AfterBackend(obs, &frame.step, nullptr);
+  return std::move(frame.step);
+}
+
 VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double stamp_s) {
   if (in_flight_) throw std::logic_error("VisualSlam::Process: a frame is in flight (Flush first)");
-  VisualSlamStep step;
+  InFlight frame;
   ++frames_processed_;
-  const std::vector<frontend::RemapRequest> requests = RemapRequests();
-  step.frontend = RunFrontend(image, index, stamp_s, requests);
-  AfterFrontend(step.frontend, requests);
-  const FrameObservations obs = BeforeBackend(after_gap_, &step);
-  after_gap_ = false;
-  RunBackend(obs, &step);
-  AfterBackend(obs, &step, nullptr);
-  return step;
+  frame.requests = RemapRequests();
+  frame.step.frontend = RunFrontend(image, index, stamp_s, frame.requests);
+  frame.after_gap = std::exchange(after_gap_, false);
+  return Complete(std::move(frame));
 }
 
 std::optional<VisualSlamStep> VisualSlam::Push(const cv::Mat& image, int64_t index, double stamp_s) {
@@ -365,11 +369,7 @@ std::optional<VisualSlamStep> VisualSlam::Flush() {
   if (!in_flight_) return std::nullopt;
   InFlight done = std::move(*in_flight_);
   in_flight_.reset();
-  AfterFrontend(done.step.frontend, done.requests);
-  const FrameObservations obs = BeforeBackend(done.after_gap, &done.step);
-  RunBackend(obs, &done.step);
-  AfterBackend(obs, &done.step, nullptr);
-  return std::move(done.step);
+  return Complete(std::move(done));
 }
 
 // The features of this frame that are no map point (tracks born since the loss) matched by their descriptors

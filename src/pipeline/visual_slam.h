@@ -8,7 +8,6 @@
 //   matched tracks go on under their map points' ids, and the Monte Carlo pose step starts from that pose.
 // The application around it reads frames, writes files and reports progress; it does no SLAM.
 #include <cstdint>
-#include <future>
 #include <memory>
 #include <optional>
 #include <span>
@@ -72,7 +71,7 @@ struct VisualSlamOptions {
   // for, projected with the latest pose) is then one frame older: the back end of the frame before has not ended.
   // The new tracks are then described within their frame's front end (FrontendOptions::describe_async is off).
   // Off by default: on 2 cores both stages already keep both cores busy (TBB), and overlapping them made each
-  // slower by more than it saved (docs/timing.md: 7-Scenes 22.1 against 24.5 frames/s sequential).
+  // slower by more than it saved (docs/timing_pipelined.md: 7-Scenes 22.3 against 24.9 frames/s sequential).
   bool pipelined = false;
   // Throws std::invalid_argument naming the field.
   void Check() const;
@@ -117,7 +116,6 @@ class VisualSlam {
   // The back end of the frame in flight, if any: before SkipFrame, Finish, ExportMap or reading the map as of the
   // last frame pushed.
   std::optional<VisualSlamStep> Flush();
-  bool in_flight() const { return in_flight_.has_value(); }
 
   // After the last frame: the reports that the System still holds back (MappingOptions::local_ba_async: the last
   // keyframe's, revised by its local bundle adjustment). Call it before reading the final map.
@@ -158,6 +156,9 @@ class VisualSlam {
   void AfterBackend(const FrameObservations& obs, VisualSlamStep* step, frontend::FrameResult* next);
   // The checks of Push on a new image (UnusableFrame).
   void CheckImage(const cv::Mat& image, int64_t index);
+  struct InFlight;
+  // The back end of a frame whose front end ran (Process, Flush): AfterFrontend to AfterBackend.
+  VisualSlamStep Complete(InFlight frame);
   // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
   void KeepFirstLooks(const FrameObservations& obs);
 

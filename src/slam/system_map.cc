@@ -456,6 +456,7 @@ void System::AdjustPoints(int slot, FrameReport* r) {
   // the 13-20 left; rendered rotation scenario with exposure steps and blur, seeds 1 and 2). They stay; the
   // pose step's inlier test still keeps them out of the poses while they disagree. Measured elsewhere: at most
   // 18 % of a keyframe's points (fast scenario, 3 of 17) left at once (robustness matrix, 10 seeds).
+  if (outliers.empty()) return;
   int points_seen = 0;
   for (const FeatureUndistorted& f : cur.features)
     if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++points_seen;
