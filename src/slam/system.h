@@ -228,12 +228,19 @@ class System {
   // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
   // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
   // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).
+  // *most_inliers (when given): the most epipolar inliers any two-view try that found a model counted (-1: none
+  // found one), and the fewest a solution needs.
+  struct InlierSupply {
+    int found = -1, needed = 0;
+  };
   std::optional<InitHypothesis> SolveInitWindow(const std::vector<int>& window, const std::vector<Eigen::Vector2d>& n1,
                                                 const std::vector<Eigen::Vector2d>& n2, const std::vector<int64_t>& ids,
-                                                int need_inliers, int need_points, std::string* why,
-                                                bool* rejected) const;
+                                                int need_inliers, int need_points, std::string* why, bool* rejected,
+                                                InlierSupply* most_inliers = nullptr) const;
   // The features a frame shares with an earlier one that are no map point: their normalised coordinates in each,
   // their ids, and the angle between each one's two rays (degrees, the rotation not removed).
+  // After a failed try from the reference: it moves on when its shared tracks could not give the inliers needed.
+  void MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply, std::vector<FrameReport>* out);
   struct Correspondences {
     std::vector<Eigen::Vector2d> n1, n2;
     std::vector<int64_t> ids;

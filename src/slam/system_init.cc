@@ -314,7 +314,8 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
                                                               const std::vector<Eigen::Vector2d>& n1,
                                                               const std::vector<Eigen::Vector2d>& n2,
                                                               const std::vector<int64_t>& ids, int need_inliers,
-                                                              int need_points, std::string* why, bool* rejected) const {
+                                                              int need_points, std::string* why, bool* rejected,
+                                                              InlierSupply* most_inliers) const {
   const InitOptions& io = options_.init;
   auto fail = [&](std::string s, bool ambiguous) -> std::optional<InitHypothesis> {
     *why = std::move(s);
@@ -333,6 +334,7 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   tv.ransac_threshold_px = io.ransac_threshold_px;
   tv.focal_px = focal;
   tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+  if (most_inliers) *most_inliers = {-1, std::max(need_inliers, tv.min_inliers)};
   std::vector<geometry::TwoViewResult> seeds;
   const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
                                                                    {io.method, options_.seed + 1},
@@ -350,6 +352,11 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
     tv.method = method;
     tv.seed = seed;
     geometry::TwoViewResult tvr = geometry::EstimateTwoView(n1, n2, tv);
+    // Every try that got as far as counting its inliers (a model was found) counts; the later checks keep the count.
+    const bool counted = tvr.ok || (tvr.status != geometry::TwoViewStatus::kBadInput &&
+                                    tvr.status != geometry::TwoViewStatus::kTooFewCorrespondences &&
+                                    tvr.status != geometry::TwoViewStatus::kNoModel);
+    if (most_inliers && counted) most_inliers->found = std::max(most_inliers->found, tvr.num_inliers);
     if (!tvr.ok) {
       last_failure = "two-view geometry failed: " + tvr.failure;
       planar |= tvr.status == geometry::TwoViewStatus::kPlanarOrRotation;
@@ -455,6 +462,34 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   return best;
 }
 
+void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply,
+                                  std::vector<FrameReport>* out) {
+  // The tracks a reference shares with later frames only ever get fewer (a track that ends never comes back), so
+  // a reference whose shared tracks gave fewer epipolar inliers than a solution needs will not give them later:
+  // it moves on to the oldest frame since it that shares enough tracks with this one to give them, at the share of
+  // outliers just measured (or, short of any, to the one that shares the most, if more than it), keeping as much
+  // of the motion gathered as it can. Before, a low-texture scene could wait for good: the rendered sparse
+  // scenario, seed 1, kept frame 0 as its reference for 190 frames, 15 tracks shared and 12-14 of them inliers
+  // against the 15 the two-view geometry needs.
+  const int outliers = static_cast<int>(shared) - supply.found;
+  const int wanted = supply.needed + std::max(outliers, 0);
+  int best_slot = -1, best_shared = static_cast<int>(shared);
+  for (int s = reference_slot_ + 1; s < cur_slot; ++s) {
+    int n = 0;
+    for (const FeatureUndistorted& f : map_.frames[cur_slot].features) n += map_.frames[s].Find(f.id) != nullptr;
+    if (n >= wanted) {
+      best_slot = s;
+      break;
+    }
+    if (n > best_shared) best_slot = s, best_shared = n;
+  }
+  if (best_slot < 0) return;
+  reference_slot_ = best_slot;
+  out->front().note += fmt::format("; the reference shares too few tracks to give them ({} of {} fit, {} needed): "
+                                   "the reference moves on to frame {}",
+                                   supply.found, shared, supply.needed, map_.frames[best_slot].index);
+}
+
 bool System::TryInitialise(std::vector<FrameReport>* out) {
   const InitOptions& io = options_.init;
   const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
@@ -504,11 +539,13 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
                             window.size(), io.min_window_frames));
   std::string why;
   bool rejected = false;
+  InlierSupply supply;
   std::optional<InitHypothesis> best =
-      SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected);
+      SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected, &supply);
   if (!best) {
     note(why);
     out->front().init_rejected = rejected;
+    if (supply.found >= 0 && supply.found < supply.needed) MoveStarvedReference(cur_slot, c.ids.size(), supply, out);
     return false;
   }
 
