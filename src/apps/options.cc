@@ -100,6 +100,12 @@ void PoseFlags::Add(CLI::App* cmd) {
                   "fixed spread)")
       ->check(NonNegative())
       ->capture_default_str();
+  cmd->add_option("--translation-prior", tracker.translation_prior_steps,
+                  "The linearised translation that sets the translation spread (Eqs. 3-5) has a prior of this many "
+                  "times the last tracked frame's step: directions the points leave free stay near the camera's "
+                  "motion (0: none, the paper's)")
+      ->check(NonNegative())
+      ->capture_default_str();
   cmd->add_option("--retry-rot-scale", tracker.retry_rot_scale,
                   "A frame lost at the first try is scored again with a rotation spread this many times wider "
                   "(0: no second try)")

@@ -21,6 +21,7 @@ NLOHMANN_JSON_SERIALIZE_ENUM(StructureMethod, {{StructureMethod::kMonteCarlo, "m
 
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseTrackerOptions, hypotheses, seed, random, sigma_rot_deg,
                                                 sigma_rot_motion_scale, sigma_trans_floor_m, sigma_trans_scale,
+                                                translation_prior_steps,
                                                 inlier_threshold_px, max_distance_px, min_points, min_inliers,
                                                 min_inlier_ratio, keyframe_min_inlier_ratio, pivot, rounds, round_shrink,
                                                 retry_rot_scale, retry_max_residual_ratio,

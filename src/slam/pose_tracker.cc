@@ -25,6 +25,8 @@ void PoseTrackerOptions::Check() const {
     fail(fmt::format("sigma_rot_motion_scale must be >= 0, got {}", sigma_rot_motion_scale));
   if (!(sigma_trans_floor_m > 0)) fail(fmt::format("sigma_trans_floor_m must be > 0, got {}", sigma_trans_floor_m));
   if (!(sigma_trans_scale >= 0)) fail(fmt::format("sigma_trans_scale must be >= 0, got {}", sigma_trans_scale));
+  if (!(translation_prior_steps >= 0) || !std::isfinite(translation_prior_steps))
+    fail(fmt::format("translation_prior_steps must be >= 0, got {}", translation_prior_steps));
   if (!(inlier_threshold_px > 0)) fail(fmt::format("inlier_threshold_px must be > 0, got {}", inlier_threshold_px));
   // Finite and well inside float range: scores are float sums over up to thousands of points.
   if (!(max_distance_px > 0 && max_distance_px <= 1e6))
@@ -97,7 +99,14 @@ int PoseTracker::ClassifyInliers(const Pose& cam_from_world, const std::vector<P
   return count;
 }
 
-Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::vector<PointObservation>& obs) const {
+double PoseTracker::TranslationPriorSigma(uint64_t frame_index) const {
+  if (!(options_.translation_prior_steps > 0) || last_tracked_index_ < 0) return 0;
+  const double frames = static_cast<double>(frame_index) - static_cast<double>(last_tracked_index_);
+  return options_.translation_prior_steps * std::max(frames, 1.0) * std::max(last_step_m_, options_.sigma_trans_floor_m);
+}
+
+Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::vector<PointObservation>& obs,
+                                                   double prior_sigma_m) const {
   // Eq. 3, Eq. 4 and Eq. 5: the translation change that moves the projections of the map the way the features
   // moved, least squares over all scoring points (stacked Jacobians, not only the centroid), with a few
   // iteratively reweighted (Huber) passes so that wrong matches do not drag it.
@@ -120,8 +129,10 @@ Eigen::Vector3d PoseTracker::LinearisedTranslation(const Pose& prev, const std::
       ++used;
     }
     if (used < 2) return Eigen::Vector3d::Zero();
-    // A tiny ridge keeps the depth direction defined when all points sit at one depth.
+    // A tiny ridge keeps the depth direction defined when all points sit at one depth; the prior (1 px of the
+    // points' noise against prior_sigma_m of the change) keeps a direction the points leave free near no change.
     A += 1e-9 * A.trace() * Eigen::Matrix3d::Identity();
+    if (prior_sigma_m > 0) A += Eigen::Matrix3d::Identity() / (prior_sigma_m * prior_sigma_m);
     dt = A.ldlt().solve(b);
     if (!dt.allFinite()) return Eigen::Vector3d::Zero();
   }
@@ -215,7 +226,8 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     return est;
   }
 
-  const Eigen::Vector3d dt = LinearisedTranslation(prev, obs);
+  const double prior_sigma_m = TranslationPriorSigma(frame_index);
+  const Eigen::Vector3d dt = LinearisedTranslation(prev, obs, prior_sigma_m);
   est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
   const double sigma_rot_deg = std::max(options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg);
   if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
@@ -244,7 +256,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
       PoseEstimate fine = wide;
       std::vector<double> fine_residuals;
       std::vector<uint8_t> fine_inliers;
-      const Eigen::Vector3d fine_dt = LinearisedTranslation(wide.cam_from_world, obs);
+      const Eigen::Vector3d fine_dt = LinearisedTranslation(wide.cam_from_world, obs, prior_sigma_m);
       fine.sigma_t = (options_.sigma_trans_scale * fine_dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
       if (Score(wide.cam_from_world, m, sigma_rot_deg, obs, &fine, &fine_residuals, &fine_inliers) &&
           fine.score <= wide.score &&
@@ -281,6 +293,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     recent_median_residuals_.push_back(est.median_inlier_residual_px);
   }
   last_rotation_deg_ = AngularDistanceDeg(prev.q, est.cam_from_world.q);
+  last_step_m_ = (est.cam_from_world.OriginOfTargetInSource() - prev.OriginOfTargetInSource()).norm();
   return est;
 }
 

@@ -35,6 +35,12 @@ struct PoseTrackerOptions {
   double sigma_rot_motion_scale = 1.0;
   double sigma_trans_floor_m = 0.002;  // Sigma_trans never falls below this (m), so sampling never collapses
   double sigma_trans_scale = 1.0;      // Sigma_trans = diag(scale * |t_hat - t_prev| + floor)
+  // The linearised translation t_hat - t_prev (Eqs. 3-5) is solved with a prior: a change of the translation of
+  // zero mean and this many times the last tracked frame's step (per frame since it, at least the floor) as its
+  // standard deviation, against the scoring points' 1 px. Where the points fix the translation the prior changes
+  // nothing; where they leave a direction free (few points in one part of the image) the spread along it stays
+  // near what the camera's motion makes likely instead of whatever the noise gives. 0: no prior (the paper's).
+  double translation_prior_steps = 3.0;
   double inlier_threshold_px = 3.0;    // residual under which a point is an inlier at the best pose
   double max_distance_px = 1e4;        // cap on one point's contribution to the score (1e4: the paper's plain sum)
   int min_points = 6;                  // fewer scoring points than this: the frame is lost, nothing is scored
@@ -119,8 +125,10 @@ class PoseTracker {
                       std::vector<double>* residuals_px, std::vector<uint8_t>* inliers) const;
 
   // The translation the linearised translation-only model predicts, from the scoring points.
+  // prior_sigma_m > 0: the zero-mean prior of PoseTrackerOptions::translation_prior_steps with that deviation.
   Eigen::Vector3d LinearisedTranslation(const Pose& prev_cam_from_world,
-                                        const std::vector<PointObservation>& observations) const;
+                                        const std::vector<PointObservation>& observations,
+                                        double prior_sigma_m = 0) const;
 
   // The least translation spread (m), options().sigma_trans_floor_m: a System sets it once the map's scale is
   // known. Throws std::invalid_argument unless > 0.
@@ -147,6 +155,10 @@ class PoseTracker {
   std::vector<float> sx_, sy_, sz_, su_, sv_;
   // Rotation between the previous pose and the estimate of the last tracked frame (0 after a lost one).
   double last_rotation_deg_ = 0;
+  // The camera centre's move from the previous pose to the estimate of the last tracked frame (m).
+  double last_step_m_ = 0;
+  // The deviation of the linearised translation's prior for a frame (PoseTrackerOptions::translation_prior_steps).
+  double TranslationPriorSigma(uint64_t frame_index) const;
   // Median inlier residual (px) of the last tracked frames, oldest first (at most kTypicalFrames).
   static constexpr size_t kTypicalFrames = 20;
   std::vector<double> recent_median_residuals_;

@@ -196,9 +196,12 @@ TEST(CliRun, ASmallParallaxProvisionalMapTakesTheBetterMinimumOfTheBasReliefVall
 // A car at 1 m a frame (the forward scenario, rendered: a 90-degree bend, 119 m): the map renews itself every few
 // frames, and with the paper's back end alone (poses and points never refined together) each generation of
 // points passes its scale and heading errors on to the next. The local bundle adjustment after each keyframe
-// holds them. Seed 9, measured: 120 / 120 tracked, ATE 16.5 cm with it; 117 / 120 and 5.2 m without (the
-// scale grew 1.9x after the bend). Over seeds 1-10 with it, 3-24 cm (docs/robustness.md). Bounds: every frame
-// tracked; ATE under 0.5 m (0.4 % of the path; ~2x the worst seed); the run without it at least 5x worse.
+// holds them. Seed 9, measured: 120 / 120 tracked, ATE 16.2 cm with it (the scale of four 30-frame segments within
+// 2.3 % of each other); without it, 79 / 120 (lost from the bend on) and 0.79 m over those, the scale 14 % off by
+// frame 78 (before the pose step's translation prior, PoseTrackerOptions::translation_prior_steps: 117 / 120 and
+// 5.2 m, the scale 1.9x after the bend). Over seeds 1-10 with it, 3-24 cm (docs/robustness.md). Bounds: every frame
+// tracked; ATE under 0.5 m (0.4 % of the path; ~2x the worst seed); the run without it loses frames or is at least
+// 5x worse.
 TEST(CliRun, TheLocalBundleAdjustmentKeepsACarsScaleThroughItsBend) {
   TempDir dir;
   const auto s = RunMcslam("synth --scenario forward --seed 9 --render --out " + dir / "s");
@@ -210,7 +213,9 @@ TEST(CliRun, TheLocalBundleAdjustmentKeepsACarsScaleThroughItsBend) {
   const auto without = RunMcslam(
       fmt::format("run {} --dataset synthetic --seed 9 --local-ba-keyframes 0 --out {}", dir / "s", dir / "n"));
   ASSERT_EQ(without.exit_code, 0) << without.output;
-  EXPECT_GT(Field(without.output, "ate_rmse"), 5 * Field(with.output, "ate_rmse")) << without.output;
+  EXPECT_TRUE(Field(without.output, "tracked") < 120 ||
+              Field(without.output, "ate_rmse") > 5 * Field(with.output, "ate_rmse"))
+      << without.output;
 }
 
 // Frames 120-149 of the rendered paper scene unreadable: the camera moved on meanwhile. Scene seeds 1 and 2: on
