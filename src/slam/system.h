@@ -237,10 +237,12 @@ class System {
                                                 const std::vector<Eigen::Vector2d>& n2, const std::vector<int64_t>& ids,
                                                 int need_inliers, int need_points, std::string* why, bool* rejected,
                                                 InlierSupply* most_inliers = nullptr) const;
-  // The features a frame shares with an earlier one that are no map point: their normalised coordinates in each,
-  // their ids, and the angle between each one's two rays (degrees, the rotation not removed).
   // After a failed try from the reference: it moves on when its shared tracks could not give the inliers needed.
   void MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply, std::vector<FrameReport>* out);
+  // How many of frame cur_slot's features frame s saw too.
+  int SharedFeatures(int s, int cur_slot) const;
+  // The features a frame shares with an earlier one that are no map point: their normalised coordinates in each,
+  // their ids, and the angle between each one's two rays (degrees, the rotation not removed).
   struct Correspondences {
     std::vector<Eigen::Vector2d> n1, n2;
     std::vector<int64_t> ids;

@@ -462,6 +462,12 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   return best;
 }
 
+int System::SharedFeatures(int s, int cur_slot) const {
+  int n = 0;
+  for (const FeatureUndistorted& f : map_.frames[cur_slot].features) n += map_.frames[s].Find(f.id) != nullptr;
+  return n;
+}
+
 void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply,
                                   std::vector<FrameReport>* out) {
   // The tracks a reference shares with later frames only ever get fewer (a track that ends never comes back), so
@@ -475,8 +481,7 @@ void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSuppl
   const int wanted = supply.needed + std::max(outliers, 0);
   int best_slot = -1, best_shared = static_cast<int>(shared);
   for (int s = reference_slot_ + 1; s < cur_slot; ++s) {
-    int n = 0;
-    for (const FeatureUndistorted& f : map_.frames[cur_slot].features) n += map_.frames[s].Find(f.id) != nullptr;
+    const int n = SharedFeatures(s, cur_slot);
     if (n >= wanted) {
       best_slot = s;
       break;
@@ -511,9 +516,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   if (static_cast<int>(c.ids.size()) < need.common) {
     int next = cur_slot;
     for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
-      int shared = 0;
-      for (const FeatureUndistorted& f : map_.frames[cur_slot].features) shared += map_.frames[s].Find(f.id) != nullptr;
-      if (shared >= need.common) next = s;
+      if (SharedFeatures(s, cur_slot) >= need.common) next = s;
     }
     const size_t had = c.ids.size();
     reference_slot_ = next;
