@@ -14,6 +14,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <Eigen/SVD>
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
@@ -70,20 +71,39 @@ std::optional<Eigen::Matrix3d> EssentialEightPoint(std::span<const Eigen::Vector
     return std::nullopt;
 
   // One row per correspondence: x2^T E x1 = 0 written as a . e = 0, e = E in row-major order.
-  Eigen::Matrix<double, Eigen::Dynamic, 9> a(n, 9);
-  for (int k = 0; k < n; ++k) {
+  auto row = [&](int k) {
     const int i = indices.empty() ? k : indices[k];
     const Eigen::Vector3d p1 = t1 * uv_norm1[i].homogeneous();
     const Eigen::Vector3d p2 = t2 * uv_norm2[i].homogeneous();
-    a.row(k) << p2.x() * p1.x(), p2.x() * p1.y(), p2.x(), p2.y() * p1.x(), p2.y() * p1.y(), p2.y(), p1.x(), p1.y(),
-        1.0;
+    Eigen::Matrix<double, 9, 1> r;
+    r << p2.x() * p1.x(), p2.x() * p1.y(), p2.x(), p2.y() * p1.x(), p2.y() * p1.y(), p2.y(), p1.x(), p1.y(), 1.0;
+    return r;
+  };
+  Eigen::Matrix<double, 9, 1> e;
+  if (n == 8) {
+    // The minimal sample (RANSAC calls this for every one): the null vector of the 8 x 9 A is the last column of
+    // Q in A^T = Q R, orthogonal to A's 8 rows. Column pivoting makes R rank-revealing: |R77| / |R00| stands for
+    // the second-smallest singular value of the 9 relative to the largest (within small factors, which the
+    // tolerance's margin covers). A few times cheaper than the Jacobi SVD of A, which iterates to convergence.
+    Eigen::Matrix<double, 9, 8> a_t;
+    for (int k = 0; k < 8; ++k) a_t.col(k) = row(k);
+    const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 9, 8>> qr(a_t);
+    const double r00 = std::abs(qr.matrixQR()(0, 0)), r77 = std::abs(qr.matrixQR()(7, 7));
+    if (!(r00 > 0) || r77 < kRankTolerance * r00) return std::nullopt;
+    e = qr.householderQ() * Eigen::Matrix<double, 9, 1>::Unit(8);
+  } else {
+    // Least squares over n > 8: the right singular vector of the smallest singular value. A's QR (A = Q R, Q
+    // orthonormal) gives a 9 x 9 R with A's singular values and right singular vectors, and its fixed-size SVD is
+    // cheaper than the n x 9 one; QR keeps A's conditioning, which the normal equations A^T A would square.
+    Eigen::Matrix<double, Eigen::Dynamic, 9> a(n, 9);
+    for (int k = 0; k < n; ++k) a.row(k) = row(k).transpose();
+    const Eigen::HouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 9>> qr(a);
+    const Eigen::Matrix<double, 9, 9> r = qr.matrixQR().topRows<9>().triangularView<Eigen::Upper>();
+    const Eigen::JacobiSVD<Eigen::Matrix<double, 9, 9>> svd(r, Eigen::ComputeFullV);
+    const auto& sv = svd.singularValues();  // decreasing; the second-smallest is sv[7]
+    if (!(sv[0] > 0) || sv[7] < kRankTolerance * sv[0]) return std::nullopt;
+    e = svd.matrixV().col(8);
   }
-  const Eigen::JacobiSVD<Eigen::Matrix<double, Eigen::Dynamic, 9>> svd(a, Eigen::ComputeFullV);
-  const auto& sv = svd.singularValues();  // min(n, 9) values, decreasing; for n = 8 the 9th is 0 implicitly
-  // The second-smallest of the 9 is sv[7] both for n = 8 and n >= 9.
-  if (!(sv[0] > 0) || sv[7] < kRankTolerance * sv[0]) return std::nullopt;
-
-  const Eigen::Matrix<double, 9, 1> e = svd.matrixV().col(8);
   Eigen::Matrix3d e_normalised;
   e_normalised << e[0], e[1], e[2], e[3], e[4], e[5], e[6], e[7], e[8];
   // p2^T En p1 = x2^T (T2^T En T1) x1.
