@@ -113,6 +113,8 @@ struct SelfCalibration {
   double sigma_k1 = 0;         // the standard deviation its likelihood ratio implies
   double z = 0;                // |k1_measured - k1_given| / sigma_k1: the square root of the likelihood ratio
   double corner_shift_px = 0;  // how far the change moves a feature seen at the image's farthest corner
+  double k1_half[2] = {0, 0}, sigma_k1_half[2] = {0, 0};  // the same fit on each half of the points (alternate)
+  double min_half_share = 0;   // the smaller of the halves' changes of k1 over the whole's (negative: opposite)
   int frames = 0, points = 0, observations = 0;
   std::string note;            // one line: what was measured and what was done
 };

@@ -250,23 +250,46 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   co.free_focal = false;
   co.num_threads = 1;  // the same seed, the same result
   const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(camera_, sub_cams, X, obs, fixed, co);
+  // The same fit on each half of the points (alternate ones): a lens bends every point's ray alike, so both
+  // halves measure the same k1; a k1 that only absorbs the errors of some tracks does not repeat
+  // (InitOptions::calibration_max_split_z).
+  for (int half = 0; half < 2; ++half) {
+    std::vector<int> point_in_half(X.size(), -1);
+    std::vector<Eigen::Vector3d> X_half;
+    std::vector<geometry::PixelObservation> obs_half;
+    for (const geometry::PixelObservation& o : obs) {
+      if (o.point % 2 != half) continue;
+      if (point_in_half[o.point] < 0) {
+        point_in_half[o.point] = static_cast<int>(X_half.size());
+        X_half.push_back(X[o.point]);
+      }
+      obs_half.push_back({o.camera, point_in_half[o.point], o.uv_px});
+    }
+    const geometry::IntrinsicsFit h = geometry::RefineIntrinsics(camera_, sub_cams, X_half, obs_half, fixed, co);
+    c.k1_half[half] = h.camera.dist.k1;
+    c.sigma_k1_half[half] = h.sigma_k1;
+  }
   c.frames = static_cast<int>(sub_cams.size());
   c.points = static_cast<int>(X.size());
   c.observations = fit.observations;
   c.k1_measured = fit.camera.dist.k1;
   c.sigma_k1 = fit.sigma_k1;
   c.z = std::sqrt(fit.chi2);
+  const double change = c.k1_measured - c.k1_given;
+  auto share = [&](int half) { return change == 0 ? 0.0 : (c.k1_half[half] - c.k1_given) / change; };
+  c.min_half_share = std::min(share(0), share(1));
   c.corner_shift_px = 0;
   for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera_.width - 1, 0),
                                        Eigen::Vector2d(0, camera_.height - 1),
                                        Eigen::Vector2d(camera_.width - 1, camera_.height - 1)})
     c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - camera_.UndistortPixel(corner)).norm());
   c.accepted = std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
-               c.corner_shift_px >= io.calibration_min_shift_px;
+               c.corner_shift_px >= io.calibration_min_shift_px && c.min_half_share >= io.calibration_min_half_share;
   c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
-                       "the farthest corner): {}",
+                       "the farthest corner; halves of the points {:.4f} +- {:.4f} and {:.4f} +- {:.4f}, the "
+                       "smaller {:.2f} of the change): {}",
                        c.accepted ? "self-calibrated" : "checked", c.frames, c.points, c.k1_measured, c.sigma_k1, c.z,
-                       c.corner_shift_px,
+                       c.corner_shift_px, c.k1_half[0], c.sigma_k1_half[0], c.k1_half[1], c.sigma_k1_half[1], c.min_half_share,
                        c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
                                   : fmt::format("k1 {:g} kept", c.k1_given));
   if (!c.accepted) return false;

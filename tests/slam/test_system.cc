@@ -582,7 +582,8 @@ TEST(SystemOptions, CheckNamesTheField) {
   const std::pair<const char*, std::function<void(SystemOptions&)>> calibration[] = {
       {"calibration_min_z", [](SystemOptions& x) { x.init.calibration_min_z = 0; }},
       {"calibration_min_z", [](SystemOptions& x) { x.init.calibration_min_z = std::nan(""); }},
-      {"calibration_min_shift_px", [](SystemOptions& x) { x.init.calibration_min_shift_px = -1; }}};
+      {"calibration_min_shift_px", [](SystemOptions& x) { x.init.calibration_min_shift_px = -1; }},
+      {"calibration_min_half_share", [](SystemOptions& x) { x.init.calibration_min_half_share = 1.5; }}};
   for (const auto& [field, spoil] : calibration) {
     o = {};
     spoil(o);
