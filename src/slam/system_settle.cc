@@ -252,7 +252,7 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(camera_, sub_cams, X, obs, fixed, co);
   // The same fit on each half of the points (alternate ones): a lens bends every point's ray alike, so both
   // halves measure the same k1; a k1 that only absorbs the errors of some tracks does not repeat
-  // (InitOptions::calibration_max_split_z).
+  // (InitOptions::calibration_min_half_share).
   for (int half = 0; half < 2; ++half) {
     std::vector<int> point_in_half(X.size(), -1);
     std::vector<Eigen::Vector3d> X_half;
