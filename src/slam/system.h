@@ -376,6 +376,10 @@ class System {
   // centre all its frames share (a well-posed frame of the tracked run before), and each track's bearing in the
   // world as first seen from there.
   static constexpr int kPanoramaCentreLookback = 10;  // frames searched back for a well-posed centre
+  // The first frame of the current run of poses that follow from one another: a relocalised frame starts one (its
+  // pose does not follow from the frame before, which may have been posed in a provisional map given up since).
+  // A turn's centre is looked for from there on.
+  int pose_run_start_slot_ = 0;
   Eigen::Vector3d panorama_centre_ = Eigen::Vector3d::Zero();
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
   std::vector<std::pair<int, double>> panorama_rms_px_;  // each of its frames (slot) and its residual, in order
