@@ -254,24 +254,6 @@ bool System::TrackRotationOnly(int slot, FrameReport* r, bool over_pose) {
     panorama_bearings_.clear();
     return false;
   }
-  // Over a pose the pose step found, the turn must also put the points that pose fitted where they are seen: a turn
-  // about a centre the camera is not at moves them by pixels (rotation scenario with image noise 6, seed 6: a turn
-  // about a centre from before a relocalisation put the 17 points of a relocalised frame's next pose step 22 px off).
-  if (over_pose) {
-    std::vector<double> fitted_px;
-    for (const FeatureUndistorted& f : fr.features)
-      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved && p->inlier && AtCurrentScale(f.id)) {
-        Eigen::Vector2d uv;
-        if (ideal_.ProjectWorld(turned, p->position_in_world, &uv)) fitted_px.push_back((uv - f.uv_px).norm());
-        else fitted_px.push_back(std::numeric_limits<double>::infinity());
-      }
-    if (!fitted_px.empty() && UpperMedian(fitted_px) > options_.tracker.inlier_threshold_px) {
-      r->note = fmt::format("no turn about the last centre: it puts the {} points the pose step fitted a median of "
-                            "{:.1f} px from where they are seen", fitted_px.size(), UpperMedian(fitted_px));
-      panorama_bearings_.clear();
-      return false;
-    }
-  }
   panorama_min_rms_px_ = std::min(panorama_min_rms_px_, rot.rms_px);
   panorama_rms_px_.emplace_back(slot, rot.rms_px);
   fr.has_pose = true;

@@ -193,16 +193,15 @@ TEST(CliRun, ASmallParallaxProvisionalMapTakesTheBetterMinimumOfTheBasReliefVall
   EXPECT_EQ(report["guessed_scale"].get<int>(), 0) << r.output;
 }
 
-// A turn taken over a weak pose must fit that pose's points. Rotation scenario with image noise 6, seed 6: the
-// provisional map made after the first turn is lost at frame 195, where the map is found again (a frame
-// relocalised from 17 matches); the next frames see 14-17 map points, fewer than a pose needs to stand against a
-// turn, and their tracks agree on one. The turn's centre was taken from the well-posed frames before, those of
-// the provisional map that was just given up, 12 cm from the relocalised centre: frames 196-200 were placed
+// A turn after a relocalisation is about the relocalised frame's centre. Rotation scenario with image noise 6,
+// seed 6: the provisional map made after the first turn is lost at frame 195, where the map is found again (a
+// frame relocalised from 17 matches); the next frames see 14-17 map points, fewer than a pose needs to stand
+// against a turn, and their tracks agree on one. The turn's centre was taken from the best-posed frames before
+// it, those of the provisional map just given up, 12 cm from the relocalised centre: frames 196-200 were placed
 // there, their 14-17 map points 22-24 px from where they are seen. Now a turn's centre is looked for only among
-// the frames posed since the last relocalisation, and a turn that puts the weak pose's points more than the
-// inlier threshold off is refused. Measured: frames 196-199 turn about frame 195's centre, 0.78-0.87 px, 0.8 cm
-// from the truth (12.9 cm before). Bounds: at least one such turn over a weak pose after the relocalisation (the
-// case itself), each within the pose step's inlier threshold of 3 px.
+// the frames posed since the last relocalisation. Measured: frames 196-199 turn about frame 195's centre,
+// 0.78-0.87 px, 0.8 cm from the truth (12.9 cm before). Bounds: at least one such turn over a weak pose after
+// the relocalisation (the case itself), each within the pose step's inlier threshold of 3 px.
 TEST(CliRun, ATurnOverAWeakPoseAfterARelocalisationFitsItsPoints) {
   TempDir dir;
   const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed 6 --image-noise 6 --render --out {}", dir / "s"));
