@@ -91,7 +91,7 @@ void BM_LocalBundleAdjust(benchmark::State& state) {
 }
 BENCHMARK(BM_LocalBundleAdjust)->Arg(150)->Arg(300)->Arg(600)->UseRealTime()->Unit(benchmark::kMillisecond);
 
-// The settling of the first map (System::Settle): every posed frame since the reference (up to 120), all free but
+// The settling of the first map (Settler::Settle): every posed frame since the reference (up to 120), all free but
 // the first, and the points they share, Cauchy loss, at most 50 iterations; 7-Scenes' last settling step refines
 // 112 frames and 300 points. Dense Schur (as Settle runs it) against sparse Schur on the same problem.
 void BM_SettleBundleAdjust(benchmark::State& state) {

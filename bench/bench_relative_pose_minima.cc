@@ -1,5 +1,5 @@
 // Google Benchmark case for the bas-relief valley search of the initialisation (geometry::RelativePoseMinima, run by
-// System::ValleyNeighbours on every initialisation attempt that reaches a winning two-view solution): up to 53
+// Initializer::ValleyNeighbours on every initialisation attempt that reaches a winning two-view solution): up to 53
 // Levenberg-Marquardt refinements of the two views' Sampson cost, as the System calls it (at most 100 iterations
 // each, radius = the views' median parallax). The scene: 50, 150 or 400 correspondences between two views of points
 // 2-4 m ahead, a sideways baseline giving about 3.6 degrees of parallax (the held-out rotation seed 15's window:

@@ -5,7 +5,7 @@
 // then inconsistent from view to view, and the map's scale drifts with the direction of motion. The
 // reprojection errors of a map seen from many views measure the first radial coefficient (and the focal
 // length, less well); RefineIntrinsics gives the refined camera and the likelihood ratio against the given one,
-// and its caller decides (System::SelfCalibrate, docs/self_calibration.md).
+// and its caller decides (Settler::SelfCalibrate, docs/self_calibration.md).
 #include <string>
 #include <vector>
 

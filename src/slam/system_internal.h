@@ -1,8 +1,7 @@
 #pragma once
-// Helpers shared by the System's stage files (system.cc, system_init.cc, system_settle.cc, system_track.cc,
-// system_map.cc, system_bridge.cc); not part of the slam layer's interface.
+// Helpers shared by the System's stage files (initializer.cc, settler.cc, frame_tracker.cc, mapper.cc, bridge.cc,
+// relocaliser.cc); not part of the slam layer's interface.
 #include <chrono>
-#include <future>
 #include <string>
 #include <vector>
 
@@ -10,7 +9,6 @@
 
 #include "core/pose.h"
 #include "geometry/bundle_adjust.h"
-#include "slam/system.h"
 
 namespace mcslam::slam::detail {
 
@@ -24,7 +22,7 @@ inline double ParallaxForDepthNoiseDeg(double noise_px, double focal_px, double 
 }
 
 // The largest difference (degrees) between a frame's orientation in a provisional map and its relocalised one
-// for the provisional map to join the map (System::JoinBridge): the provisional map's orientation is anchored to
+// for the provisional map to join the map (Bridge::Join): the provisional map's orientation is anchored to
 // the map's at the turn and drifts little while it lasts; its scale is what the join finds.
 constexpr double kJoinMaxRotationDeg = 5.0;
 
@@ -60,30 +58,3 @@ inline double Ms(std::chrono::steady_clock::time_point t0) {
 }
 
 }  // namespace mcslam::slam::detail
-
-namespace mcslam::slam {
-
-// One local bundle adjustment (System::PrepareLocalBa): the problem, copied out of the map so that it can be
-// solved on another thread while the map is read, and the keyframe whose report it completes.
-struct System::LocalBa {
-  int slot = -1;
-  std::vector<int> window;    // frame slots, oldest first
-  size_t first_adjusted = 0;  // window[first_adjusted..] are adjusted, those before fixed
-  WindowPoints wp;            // wp.X and the poses below are what the solve changes
-  std::vector<Pose> cams;
-  std::vector<bool> fixed, fixed_points;
-  geometry::BundleAdjustOptions options;
-  double prepare_ms = 0;
-  // MappingOptions::local_ba_async: the solve under way (its time, ms) and the keyframe's report as Process
-  // returned it.
-  std::future<double> solved;
-  FrameReport report;
-  // Solves the problem in place; returns its time (ms).
-  double Solve() {
-    const auto t0 = std::chrono::steady_clock::now();
-    geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, options, fixed_points);
-    return detail::Ms(t0);
-  }
-};
-
-}  // namespace mcslam::slam

@@ -73,7 +73,7 @@ struct InitOptions {
   // Frames before the reference: when the reference moved on while waiting (min_common_features), the
   // frames before it were never posed. After the initialisation each is placed by RANSAC PnP against the
   // new map, newest first, for as long as one is (at least the tracker's min_inliers agreeing, and at least
-  // half of the map points it sees, and following the frame after it: System::FollowsFrom), and placed again
+  // half of the map points it sees, and following the frame after it: Initializer::FollowsFrom), and placed again
   // after every settling adjustment.
   bool pose_frames_before_reference = true;
   // Self-calibration of the lens' first radial distortion coefficient, once, at the settling's last adjustment
@@ -105,7 +105,7 @@ struct MappingOptions {
   // New points (linear triangulation between posed frames).
   int min_track_frames = 3;                  // posed frames a feature must be seen in
   double min_parallax_deg = 2.0;
-  // ... and at least what the tracks' noise asks for (System::TriangulateNewPoints): a depth error of at most
+  // ... and at least what the tracks' noise asks for (Mapper::TriangulateNewPoints): a depth error of at most
   // this fraction of the depth, capped at max_noise_parallax_deg.
   double max_relative_depth_noise = 0.03;
   double max_noise_parallax_deg = 12.0;
@@ -126,7 +126,7 @@ struct MappingOptions {
   // A place seen again: a new track whose point, triangulated, is where one map point not seen in this frame
   // projects (within min(max_reprojection_px, adjust_threshold_px) in every view it is triangulated from, not seen
   // beside the track, and no other such point) goes on as that map point instead of making a second one
-  // (System::RevisitedPoint, MergeTrack; the front end is told through System::merged_tracks). Without it, every return to a mapped place whose
+  // (Mapper::RevisitedPoint, MergeTrack; the front end is told through System::merged_tracks). Without it, every return to a mapped place whose
   // lost points the remapping does not find adds the place's points again (a 10,000-frame orbit: 354 map points
   // after 1,000 frames, 1,671 at the end). Off by default until two end-to-end runs it changes are understood: the
   // rendered rotation scenario, seed 15 (a provisional map after a pan), went from 2.2 to 4.1 cm, and after
@@ -136,7 +136,7 @@ struct MappingOptions {
   // the triangulation's search through the track history stay bounded on a run of any length. Never less
   // than the Fibonacci window reaches back, nor the frames since the reference while initialising/settling.
   int history_frames = 1000;
-  // Monte Carlo point adjustment (System::AdjustPoints).
+  // Monte Carlo point adjustment (PointAdjuster::AdjustPoints).
   bool adjust = true;
   double adjust_threshold_px = 2.5;          // a point whose residual stays above this is an outlier (the paper's threshold)
   // Points with a residual above this are re-sampled (the paper uses adjust_threshold_px for both). Lower
@@ -148,7 +148,7 @@ struct MappingOptions {
   double sigma_scale = 1.0;                  // Sigma_j = diag(scale * |dz| + floor), dz from Eqs. 8-9
   double sigma_floor_rel_depth = 0.01;       // floor, as a fraction of the point's depth
   double max_distance_px = 20.0;             // cap of one observation's contribution to a sample's score
-  // Local bundle adjustment (System::PrepareLocalBa), after each keyframe's Monte Carlo point adjustment:
+  // Local bundle adjustment (Mapper::PrepareLocalBa), after each keyframe's Monte Carlo point adjustment:
   // the poses of the newest local_ba_keyframes keyframes and every point they see, refined together; the
   // twice as many keyframes before them and the Fibonacci window's older ones held fixed (they hold the gauge
   // and the scale). The paper's estimators never move a pose and a point together: each new point is
@@ -211,7 +211,7 @@ struct SystemOptions {
   // well-posed camera centre, from the bearings of the tracks (Wahba's problem; the rotation-only model of a
   // panorama), while fewer than rotation_only_min_tracks of the map points it tracks are in view, at least that
   // many tracks and rotation_only_min_ratio of those shared agree within 3 sigma of the tracks' measured noise, and their
-  // residual has not grown (System::TrackRotationOnly): a camera that also moves makes the tracks disagree with
+  // residual has not grown (FrameTracker::TrackRotationOnly): a camera that also moves makes the tracks disagree with
   // any rotation, and the frame is lost as before. No keyframe, no point is made from such frames; the map's pose
   // step takes over as soon as it has points again (lost ones found again by remapping near where the turn
   // projects them). docs/rotation_only.md.

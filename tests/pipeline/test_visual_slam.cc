@@ -308,7 +308,7 @@ TEST(VisualSlam, AWeakPoseInAPureTurnIsTakenAsTheTurn) {
 }
 
 // The point adjustment's outliers are a few points at a time; more than half of a keyframe's map points at once
-// are a window whose poses disagree (System::AdjustPoints). The rendered rotation scenario with exposure steps
+// are a window whose poses disagree (PointAdjuster::AdjustPoints). The rendered rotation scenario with exposure steps
 // and blur (`mcslam synth --scenario rotation --seed 2 --render --exposure-step 1.3 --blur-sigma 2`): after its
 // provisional map joined the map, the frames the local adjustment had stepped over were ~7 px off the points it
 // moved, and 49 of the 79 points of frame 210 were removed at once; the run then drifted on 13-20 inliers (ATE

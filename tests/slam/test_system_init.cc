@@ -47,7 +47,7 @@ TEST(PooledLag1Correlation, NoiseBiasAndAR1) {
   EXPECT_EQ(detail::PooledLag1Correlation({{Eigen::Vector2d(1, 2)}, {}}), 0.0);
 }
 
-// A frame placed by PnP before the reference is checked against the posed frame after it (System::FollowsFrom):
+// A frame placed by PnP before the reference is checked against the posed frame after it (Initializer::FollowsFrom):
 // the median angle between a track's ray in that frame and its epipolar plane under the two poses. Two cameras
 // 2-5 cm and 0-6 degrees apart (a thirtieth of a second of a fast hand-held camera), 60 points 1-6 m in front seen
 // by both through 0.5 px of noise at f = 500 px, 20 seeds, three motions: a random one, an orbit (the turn keeps
@@ -351,7 +351,7 @@ TEST(System, AReferenceThatCannotGiveTheInliersNeededMovesOn) {
   EXPECT_LT(err.ate_m.mean, 0.005);
 }
 
-// The settling's depth-reversal test (System::FlipIfMirrored) leaves a right map alone on noisy tracks: the noisy
+// The settling's depth-reversal test (Settler::FlipIfMirrored) leaves a right map alone on noisy tracks: the noisy
 // paper scenario (1 px, 10 % outliers) initialises on the scene, not its mirror, and at the first settling steps
 // (16-30 frames, ~5 deg) its mirror fits the window about as well. Under clang's rounding seed 1's first step had
 // the mirror ahead by a chi-square of 22-35 (2.79 or 2.98 px^2 against 2.47): flipped, the run ended with every

@@ -1,7 +1,7 @@
-// The settling of the first map (after the System's initialisation, paper §6.1): the window since the reference
+// The settling of a new map (settler.h; after the initialisation, paper §6.1): the window since the reference
 // frame adjusted together while the parallax grows, the depth-reversal test made again over it, and the lens'
 // self-calibration when it has settled.
-#include "slam/system.h"
+#include "slam/settler.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +14,7 @@
 #include "core/median.h"
 #include "geometry/bundle_adjust.h"
 #include "geometry/self_calibration.h"
+#include "slam/initializer.h"
 #include "slam/system_internal.h"
 
 namespace mcslam::slam {
@@ -22,39 +23,6 @@ using detail::CappedMeanSquarePx2;
 using detail::EvenlySpread;
 using detail::kCostFloorPx2;
 using detail::MirrorInDepth;
-
-System::WindowPoints System::CollectWindowPoints(const std::vector<int>& window) {
-  WindowPoints wp;
-  std::unordered_map<int64_t, int> count, index;
-  for (int s : window)
-    for (const FeatureUndistorted& f : map_.frames[s].features)
-      if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) ++count[f.id];
-  for (size_t w = 0; w < window.size(); ++w)
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
-      MapPoint* p = map_.Find(f.id);
-      if (!p || p->state == PointState::kRemoved || count[f.id] < 2) continue;
-      auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
-      if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world);
-      wp.obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
-    }
-  return wp;
-}
-
-int System::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index) {
-  std::vector<std::vector<double>> residuals(wp.pts.size());
-  for (const geometry::BundleObservation& o : wp.obs)
-    residuals[o.point].push_back(geometry::ReprojectionErrorPx(cams[o.camera], wp.X[o.point], o.uv_norm, focal_px_));
-  int removed = 0;
-  for (size_t i = 0; i < wp.pts.size(); ++i) {
-    wp.pts[i]->position_in_world = wp.X[i];
-    if (residuals[i].size() >= 3 && UpperMedian(residuals[i]) > options_.mapping.adjust_threshold_px) {
-      wp.pts[i]->state = PointState::kRemoved;
-      wp.pts[i]->removed_frame = frame_index;
-      ++removed;
-    }
-  }
-  return removed;
-}
 
 namespace {
 
@@ -69,21 +37,21 @@ std::vector<int> ViewsAmong(const std::vector<geometry::BundleObservation>& obs,
 
 }  // namespace
 
-void System::BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points) {
+void Settler::BeginSettling(int init_slot, double baseline, double two_view_parallax_deg, int min_points) {
   init_slot_ = init_slot;
   init_baseline_ = baseline;
   init_min_points_ = min_points;
-  settling_ = options_.init.settle_parallax_deg > 0;
-  next_settle_parallax_deg_ = options_.init.settle_step * std::max(two_view_parallax_deg, 1e-3);
+  settling_ = s_.options.init.settle_parallax_deg > 0;
+  next_settle_parallax_deg_ = s_.options.init.settle_step * std::max(two_view_parallax_deg, 1e-3);
 }
 
-double System::ParallaxFromReference(int slot) const {
-  const FrameRecord& ref = map_.frames[reference_slot_];
-  const FrameRecord& cur = map_.frames[slot];
+double Settler::ParallaxFromReference(int slot) const {
+  const FrameRecord& ref = s_.map.frames[s_.reference_slot];
+  const FrameRecord& cur = s_.map.frames[slot];
   const Pose pair[2] = {ref.cam_from_world, cur.cam_from_world};
   std::vector<double> parallax;
   for (const FeatureUndistorted& f : cur.features) {
-    const MapPoint* p = map_.Find(f.id);
+    const MapPoint* p = s_.map.Find(f.id);
     if (!p || p->state == PointState::kRemoved || !ref.Find(f.id)) continue;
     parallax.push_back(geometry::ParallaxDeg(pair, p->position_in_world));
   }
@@ -92,26 +60,26 @@ double System::ParallaxFromReference(int slot) const {
   return UpperMedian(parallax);
 }
 
-void System::Settle(int slot, std::vector<FrameReport>* out) {
-  const InitOptions& io = options_.init;
+void Settler::Settle(int slot, std::vector<FrameReport>* out) {
+  const InitOptions& io = s_.options.init;
   const double parallax = ParallaxFromReference(slot);
   // Posed frames since the reference (at most settle_max_frames, evenly spread, with the reference, the
   // initialisation's frame and this one), and every map point seen at least twice among them.
   std::vector<int> posed;
-  for (int s = reference_slot_; s <= slot; ++s)
-    if (map_.frames[s].has_pose) posed.push_back(s);
+  for (int s = s_.reference_slot; s <= slot; ++s)
+    if (s_.map.frames[s].has_pose) posed.push_back(s);
   std::vector<int> window;
   for (int i : EvenlySpread(static_cast<int>(posed.size()), io.settle_max_frames)) window.push_back(posed[i]);
   if (std::find(window.begin(), window.end(), init_slot_) == window.end()) window.push_back(init_slot_);
   std::sort(window.begin(), window.end());
   window.erase(std::unique(window.begin(), window.end()), window.end());
   std::vector<Pose> cams;
-  for (int s : window) cams.push_back(map_.frames[s].cam_from_world);
-  WindowPoints wp = CollectWindowPoints(window);
+  for (int s : window) cams.push_back(s_.map.frames[s].cam_from_world);
+  WindowPoints wp = s_.CollectWindowPoints(window);
   std::vector<bool> fixed(window.size(), false);
   fixed.front() = true;  // the reference camera is the world
   geometry::BundleAdjustOptions bo;
-  bo.focal_px = focal_px_;
+  bo.focal_px = s_.focal_px;
   bo.huber_px = io.refine_huber_px;
   bo.cauchy = true;  // tens of frames of tracks hold wrong matches: their pull must fade
   // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
@@ -122,11 +90,11 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   if (FlipIfMirrored(window, &cams, &wp, &reversal)) geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   // (The radial-tangential k1 only: a fisheye's equidistant model is kept as given, its calibration being part of
   // any fisheye's setup.)
-  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !camera_.dist.IsFisheye() &&
+  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !s_.camera.dist.IsFisheye() &&
       !self_calibration_.tried && SelfCalibrate(window, cams, wp, slot)) {
     // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
     std::vector<Eigen::Vector3d> adjusted = std::move(wp.X);
-    wp = CollectWindowPoints(window);
+    wp = s_.CollectWindowPoints(window);
     wp.X = std::move(adjusted);
     geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   }
@@ -145,27 +113,27 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   for (Eigen::Vector3d& x : X) x = c0 + s * (x - c0);
   std::unordered_map<int, Pose> moved_by;  // window slot -> new * old^-1
   for (size_t w = 0; w < window.size(); ++w) {
-    moved_by[window[w]] = cams[w] * map_.frames[window[w]].cam_from_world.Inverse();
-    map_.frames[window[w]].cam_from_world = cams[w];
+    moved_by[window[w]] = cams[w] * s_.map.frames[window[w]].cam_from_world.Inverse();
+    s_.map.frames[window[w]].cam_from_world = cams[w];
   }
-  const FrameRecord& cur = map_.frames[slot];
-  StoreAdjustedPoints(cams, wp, cur.index);
-  RefreshInlierFlags(slot);  // at the moved current pose
+  const FrameRecord& cur = s_.map.frames[slot];
+  s_.StoreAdjustedPoints(cams, wp, cur.index);
+  s_.RefreshInlierFlags(slot);  // at the moved current pose
   // The posed frames left out of the adjustment, and those before the reference: each placed again against
   // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
-  // was first placed with, and following the frame after it, which is placed first: System::FollowsFrom), or
+  // was first placed with, and following the frame after it, which is placed first: Settler::FollowsFrom), or
   // else moved with its neighbour in the window: for a frame before the reference, which stays the world, only
   // the scale changes.
   std::vector<int> left_out;
-  for (int k = reference_slot_ - 1; k >= posed_from_; --k) left_out.push_back(k);
+  for (int k = s_.reference_slot - 1; k >= s_.posed_from; --k) left_out.push_back(k);
   for (int k : posed)
     if (!std::binary_search(window.begin(), window.end(), k)) left_out.push_back(k);
   for (int k : left_out) {
-    FrameRecord& f = map_.frames[k];
-    const bool before_reference = k < reference_slot_;
+    FrameRecord& f = s_.map.frames[k];
+    const bool before_reference = k < s_.reference_slot;
     const std::optional<Pose> pose =
-        PlaceByPnp(k, options_.tracker.min_inliers, before_reference ? options_.tracker.min_inlier_ratio : 0.0);
-    if (pose && (!before_reference || FollowsFrom(k, *pose, k + 1))) {
+        s_.PlaceByPnp(k, s_.options.tracker.min_inliers, before_reference ? s_.options.tracker.min_inlier_ratio : 0.0);
+    if (pose && (!before_reference || init_.FollowsFrom(k, *pose, k + 1))) {
       f.cam_from_world = *pose;
     } else if (before_reference) {
       f.cam_from_world.t *= s;
@@ -193,12 +161,12 @@ void System::Settle(int slot, std::vector<FrameReport>* out) {
   // A flipped map moved every pose far from where the smoother's state is (the 640x480 rotation seed 1: the
   // frame's smoothed pose 7 deg from its flipped one, the next 2 deg): it starts again there, as after a
   // relocalisation.
-  if (!reversal.empty()) smoother_.Reset(), out->front().smoothed_cam_from_world = smoother_.Update(cur.cam_from_world);
+  if (!reversal.empty()) s_.smoother.Reset(), out->front().smoothed_cam_from_world = s_.smoother.Update(cur.cam_from_world);
   out->front().note = note;
-  ResidualStats(slot, &out->front());
-  for (int k = posed_from_; k <= slot; ++k) {
-    if (k == slot || !map_.frames[k].has_pose) continue;
-    FrameReport r = PosedReport(k);
+  s_.ResidualStats(slot, &out->front());
+  for (int k = s_.posed_from; k <= slot; ++k) {
+    if (k == slot || !s_.map.frames[k].has_pose) continue;
+    FrameReport r = s_.PosedReport(k);
     r.pose_update = true;
     out->push_back(r);
   }
@@ -218,13 +186,13 @@ Eigen::Vector2d Reundistort(const PinholeCamera& from, const PinholeCamera& to, 
 
 }  // namespace
 
-bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pose>& cams, const WindowPoints& wp,
+bool Settler::SelfCalibrate(const std::vector<int>& window, const std::vector<Pose>& cams, const WindowPoints& wp,
                            int slot) {
-  const InitOptions& io = options_.init;
+  const InitOptions& io = s_.options.init;
   SelfCalibration& c = self_calibration_;
   c.tried = true;
-  c.frame = map_.frames[slot].index;
-  c.k1_given = c.k1_measured = camera_.dist.k1;
+  c.frame = s_.map.frames[slot].index;
+  c.k1_given = c.k1_measured = s_.camera.dist.k1;
   // At most kCalibrationFrames of the window, evenly spread (its first frame, the reference, among them): the
   // adjustment's cost grows with the observations, and neighbouring frames of the same tracks add little.
   std::vector<int> camera_of(window.size(), -1);  // window position -> calibration camera
@@ -243,13 +211,13 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   for (const geometry::BundleObservation& o : wp.obs) {
     if (camera_of[o.camera] < 0 || seen[o.point] < 2) continue;
     if (point_of[o.point] < 0) point_of[o.point] = static_cast<int>(X.size()), X.push_back(wp.X[o.point]);
-    obs.push_back({camera_of[o.camera], point_of[o.point], SeenPixel(camera_, o.uv_norm)});
+    obs.push_back({camera_of[o.camera], point_of[o.point], SeenPixel(s_.camera, o.uv_norm)});
   }
   geometry::IntrinsicsOptions co;
   co.loss_px = io.refine_huber_px;
   co.free_focal = false;
   co.num_threads = 1;  // the same seed, the same result
-  const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(camera_, sub_cams, X, obs, fixed, co);
+  const geometry::IntrinsicsFit fit = geometry::RefineIntrinsics(s_.camera, sub_cams, X, obs, fixed, co);
   // The same fit on each half of the points (alternate ones): a lens bends every point's ray alike, so both
   // halves measure the same k1; a k1 that only absorbs the errors of some tracks does not repeat
   // (InitOptions::calibration_min_half_share).
@@ -265,7 +233,7 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
       }
       obs_half.push_back({o.camera, point_in_half[o.point], o.uv_px});
     }
-    const geometry::IntrinsicsFit h = geometry::RefineIntrinsics(camera_, sub_cams, X_half, obs_half, fixed, co);
+    const geometry::IntrinsicsFit h = geometry::RefineIntrinsics(s_.camera, sub_cams, X_half, obs_half, fixed, co);
     c.k1_half[half] = h.camera.dist.k1;
     c.sigma_k1_half[half] = h.sigma_k1;
   }
@@ -279,10 +247,10 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
   auto share = [&](int half) { return change == 0 ? 0.0 : (c.k1_half[half] - c.k1_given) / change; };
   c.min_half_share = std::min(share(0), share(1));
   c.corner_shift_px = 0;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(camera_.width - 1, 0),
-                                       Eigen::Vector2d(0, camera_.height - 1),
-                                       Eigen::Vector2d(camera_.width - 1, camera_.height - 1)})
-    c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - camera_.UndistortPixel(corner)).norm());
+  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(s_.camera.width - 1, 0),
+                                       Eigen::Vector2d(0, s_.camera.height - 1),
+                                       Eigen::Vector2d(s_.camera.width - 1, s_.camera.height - 1)})
+    c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - s_.camera.UndistortPixel(corner)).norm());
   c.accepted = std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
                c.corner_shift_px >= io.calibration_min_shift_px && c.min_half_share >= io.calibration_min_half_share;
   c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
@@ -293,14 +261,14 @@ bool System::SelfCalibrate(const std::vector<int>& window, const std::vector<Pos
                        c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
                                   : fmt::format("k1 {:g} kept", c.k1_given));
   if (!c.accepted) return false;
-  const PinholeCamera given = camera_;
-  camera_.dist.k1 = c.k1_measured;
-  for (FrameRecord& f : map_.frames)
-    for (FeatureUndistorted& u : f.features) u.uv_px = Reundistort(given, camera_, u.uv_px);
+  const PinholeCamera given = s_.camera;
+  s_.camera.dist.k1 = c.k1_measured;
+  for (FrameRecord& f : s_.map.frames)
+    for (FeatureUndistorted& u : f.features) u.uv_px = Reundistort(given, s_.camera, u.uv_px);
   return true;
 }
 
-bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp,
+bool Settler::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp,
                             std::string* why) const {
   // A window of two views is explained about as well by the scene's mirror in depth, and one that turns more than
   // it moves (a pan, then the first steps) may even be explained a little better by the mirror: the tracks'
@@ -325,9 +293,10 @@ bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* c
     if (views[i] >= 2) sub_in_ref.push_back(in_ref.back()), sub_ids.push_back(ids.back());
   }
   if (sub_ids.size() < 3) return false;
-  const std::optional<InitHypothesis> as_is = RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
-  const std::optional<InitHypothesis> sub_mirror =
-      RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false, true);
+  const std::optional<Initializer::InitHypothesis> as_is =
+      init_.RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
+  const std::optional<Initializer::InitHypothesis> sub_mirror =
+      init_.RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false, true);
   if (!as_is || !sub_mirror) return false;
   // The map as it is needs no new placement: the settling's adjustment has just fitted it to the whole window, and
   // its cost over the frames judged is a fit the placement from scratch may miss (PnP through 10 % outliers and a
@@ -337,10 +306,10 @@ bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* c
   for (const geometry::BundleObservation& o : wp->obs)
     if (sub_of[static_cast<size_t>(o.camera)] >= 0 && views[static_cast<size_t>(o.point)] >= 2)
       settled.push_back(geometry::ReprojectionErrorPx((*cams)[static_cast<size_t>(o.camera)],
-                                                      wp->X[static_cast<size_t>(o.point)], o.uv_norm, focal_px_));
+                                                      wp->X[static_cast<size_t>(o.point)], o.uv_norm, s_.focal_px));
   const double as_is_cost =
       settled.empty() ? as_is->cost
-                      : std::min(as_is->cost, CappedMeanSquarePx2(settled, options_.mapping.max_reprojection_px));
+                      : std::min(as_is->cost, CappedMeanSquarePx2(settled, s_.options.mapping.max_reprojection_px));
   // Counted by tracks, not by observations: a track's errors are correlated along it, so the points are what
   // the window holds independently. Counted by observations, a 5-frame window of the rendered fast scenario
   // (seed 3: 36 points, both fits at 1.2-1.3 px, the mirror's 22 % lower) flipped a right map by a chi-square
@@ -354,10 +323,10 @@ bool System::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* c
   // window above: 1.28x). A mirror that is the scene leaves the map's fit far above the noise it fits at itself
   // (the 640x480 rotation seeds: 2.2x and 2.15x, 20 frames later 19x), so the mirror must also fit at most
   // kFlipCostRatio of the map's cost; a smaller lead waits for the next settling step's longer window.
-  if (!(chi2 >= options_.init.ambiguity_chi2) || !(as_is_cost >= kFlipCostRatio * sub_mirror->cost)) return false;
+  if (!(chi2 >= s_.options.init.ambiguity_chi2) || !(as_is_cost >= kFlipCostRatio * sub_mirror->cost)) return false;
   // Taken: the whole window's mirror, placed and refined (once in a run that needs it).
-  const std::optional<InitHypothesis> mirror =
-      RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false, true);
+  const std::optional<Initializer::InitHypothesis> mirror =
+      init_.RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false, true);
   if (!mirror) return false;
   const Pose world_from_ref = ref.Inverse();
   for (size_t w = 0; w < window.size(); ++w) (*cams)[w] = mirror->poses[w] * ref;

@@ -1,6 +1,6 @@
-// The System's initialisation (paper §6.1): two views, the window refined by bundle adjustment, the
-// depth-reversal ambiguity test and frames before the reference. The settling of the first map: system_settle.cc.
-#include "slam/system.h"
+// The two-view initialisation (initializer.h, paper §6.1): two views, the window refined by bundle adjustment, the
+// depth-reversal ambiguity test and frames before the reference. The settling of the first map: settler.cc.
+#include "slam/initializer.h"
 
 #include <algorithm>
 #include <chrono>
@@ -20,6 +20,8 @@
 #include "geometry/self_calibration.h"
 #include "geometry/triangulation.h"
 #include "slam/fibonacci.h"
+#include "slam/settler.h"
+#include "slam/slam_state.h"
 #include "slam/system_internal.h"
 
 namespace mcslam::slam {
@@ -30,50 +32,15 @@ using detail::kCostFloorPx2;
 using detail::MirrorInDepth;
 using detail::ParallaxForDepthNoiseDeg;
 
-std::vector<Eigen::Vector3d> detail::MirrorInDepth(const std::vector<Eigen::Vector3d>& points_in_ref) {
-  std::vector<double> z;
-  for (const Eigen::Vector3d& X : points_in_ref) z.push_back(X.z());
-  const double z0 = UpperMedian(z);
-  std::vector<Eigen::Vector3d> out;
-  out.reserve(points_in_ref.size());
-  for (const Eigen::Vector3d& X : points_in_ref) {
-    const double zm = std::max(2.0 * z0 - X.z(), 0.1 * z0);
-    out.push_back(X * (zm / X.z()));
-  }
-  return out;
-}
-
-std::vector<int> detail::EvenlySpread(int n, int m) {
-  m = std::min(n, m);
-  std::vector<int> out;
-  for (int i = 0; i < m; ++i) out.push_back(static_cast<int>(static_cast<int64_t>(i) * (n - 1) / std::max(m - 1, 1)));
-  return out;
-}
-
-double detail::PooledLag1Correlation(const std::vector<std::vector<Eigen::Vector2d>>& sequences) {
-  double lagged = 0, squared = 0;
-  for (const std::vector<Eigen::Vector2d>& r : sequences)
-    for (size_t k = 1; k < r.size(); ++k) lagged += r[k].dot(r[k - 1]), squared += r[k].squaredNorm();
-  return squared > 0 ? lagged / squared : 0.0;
-}
-
-double detail::CappedMeanSquarePx2(const std::vector<double>& residuals_px, double cap_px) {
-  if (residuals_px.empty()) return std::numeric_limits<double>::infinity();
-  const double cap_sq = cap_px * cap_px;
-  double sum = 0;
-  for (double r : residuals_px) sum += std::min(r * r, cap_sq);
-  return sum / static_cast<double>(residuals_px.size());
-}
-
-System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
+Initializer::Correspondences Initializer::Correspond(int ref_slot, int cur_slot) const {
   Correspondences c;
-  const FrameRecord& ref = map_.frames[ref_slot];
-  for (const FeatureUndistorted& f : map_.frames[cur_slot].features) {
+  const FrameRecord& ref = s_.map.frames[ref_slot];
+  for (const FeatureUndistorted& f : s_.map.frames[cur_slot].features) {
     const FeatureUndistorted* g = ref.Find(f.id);
     if (!g) continue;
-    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved) continue;
-    c.n1.push_back(ideal_.PixelToNormalized(g->uv_px));
-    c.n2.push_back(ideal_.PixelToNormalized(f.uv_px));
+    if (const MapPoint* p = s_.map.Find(f.id); p && p->state != PointState::kRemoved) continue;
+    c.n1.push_back(s_.ideal.PixelToNormalized(g->uv_px));
+    c.n2.push_back(s_.ideal.PixelToNormalized(f.uv_px));
     c.ids.push_back(f.id);
     const Eigen::Vector3d a = c.n1.back().homogeneous().normalized(), b = c.n2.back().homogeneous().normalized();
     c.motion_deg.push_back(AngleBetween(a, b) * 180.0 / M_PI);
@@ -81,69 +48,35 @@ System::Correspondences System::Correspond(int ref_slot, int cur_slot) const {
   return c;
 }
 
-System::InitCounts System::NeededCounts(int cur_slot) const {
-  const InitOptions& io = options_.init;
+Initializer::InitCounts Initializer::NeededCounts(int cur_slot) const {
+  const InitOptions& io = s_.options.init;
   const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
-                                                 static_cast<double>(map_.frames[cur_slot].features.size())));
+                                                 static_cast<double>(s_.map.frames[cur_slot].features.size())));
   auto lowered = [&](int count) { return std::min(count, std::max(io.min_count_floor, offered)); };
   return {lowered(io.min_common_features), lowered(io.min_inliers), lowered(io.min_points)};
 }
 
-geometry::PnpOptions System::TrackerPnpOptions(int min_inliers) const {
-  geometry::PnpOptions po;
-  po.focal_px = focal_px_;
-  po.threshold_px = options_.tracker.inlier_threshold_px;
-  po.min_inliers = min_inliers;
-  return po;
-}
-
-std::optional<Pose> System::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const {
-  std::vector<Eigen::Vector3d> P;
-  std::vector<Eigen::Vector2d> uv;
-  for (const FeatureUndistorted& o : map_.frames[slot].features)
-    if (const MapPoint* p = map_.Find(o.id); p && p->state != PointState::kRemoved)
-      P.push_back(p->position_in_world), uv.push_back(ideal_.PixelToNormalized(o.uv_px));
-  int inliers = 0;
-  std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &inliers);
-  if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
-  return pose;
-}
-
-double detail::EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
-                                       const Pose& b_from_a) {
-  std::vector<double> off;
-  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
-    const Eigen::Vector3d ra = b_from_a.R() * a[i];
-    const Eigen::Vector3d n = b_from_a.t.cross(ra);  // the epipolar plane's normal; nil where the move is
-    const double n_norm = n.norm();
-    off.push_back(n_norm > 0 && n_norm > 1e-12 * b_from_a.t.norm()
-                      ? std::asin(std::min(1.0, std::abs(b[i].dot(n / n_norm))))
-                      : AngleBetween(ra, b[i]));
-  }
-  return off.empty() ? 0.0 : UpperMedian(off) * 180.0 / M_PI;
-}
-
-bool System::FollowsFrom(int k, const Pose& k_from_world, int next) const {
-  const FrameRecord& fk = map_.frames[k];
-  const FrameRecord& fn = map_.frames[next];
+bool Initializer::FollowsFrom(int k, const Pose& k_from_world, int next) const {
+  const FrameRecord& fk = s_.map.frames[k];
+  const FrameRecord& fn = s_.map.frames[next];
   std::vector<Eigen::Vector3d> in_k, in_next;
   for (const FeatureUndistorted& f : fk.features)
     if (const FeatureUndistorted* g = fn.Find(f.id)) {
-      in_k.push_back(ideal_.PixelToNormalized(f.uv_px).homogeneous().normalized());
-      in_next.push_back(ideal_.PixelToNormalized(g->uv_px).homogeneous().normalized());
+      in_k.push_back(s_.ideal.PixelToNormalized(f.uv_px).homogeneous().normalized());
+      in_next.push_back(s_.ideal.PixelToNormalized(g->uv_px).homogeneous().normalized());
     }
   if (in_k.size() < kMinTracksToFollow) return true;  // nothing to judge by: as PnP placed it
-  const double limit_deg = std::atan(options_.tracker.inlier_threshold_px / focal_px_) * 180.0 / M_PI;
+  const double limit_deg = std::atan(s_.options.tracker.inlier_threshold_px / s_.focal_px) * 180.0 / M_PI;
   return detail::EpipolarDisagreementDeg(in_k, in_next, fn.cam_from_world * k_from_world.Inverse()) <= limit_deg;
 }
 
-int System::PoseFramesBefore(int before_slot, int first_slot) {
+int Initializer::PoseFramesBefore(int before_slot, int first_slot) {
   int first = before_slot;
   for (int k = before_slot - 1; k >= std::max(first_slot, 0); --k) {
-    FrameRecord& f = map_.frames[k];
+    FrameRecord& f = s_.map.frames[k];
     if (f.has_pose || f.features.empty()) break;
     const std::optional<Pose> pose =
-        PlaceByPnp(k, options_.tracker.min_inliers, options_.tracker.min_inlier_ratio);
+        s_.PlaceByPnp(k, s_.options.tracker.min_inliers, s_.options.tracker.min_inlier_ratio);
     if (!pose) break;
     if (!FollowsFrom(k, *pose, k + 1)) break;
     f.has_pose = true;
@@ -180,14 +113,14 @@ double DepthCorrelation(const std::vector<Eigen::Vector3d>& a, const std::vector
 
 }  // namespace
 
-std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector<int>& window,
+std::optional<Initializer::InitHypothesis> Initializer::RefineInitWindow(const std::vector<int>& window,
                                                                const std::optional<Pose>& last_from_ref,
                                                                std::vector<Eigen::Vector3d> points,
                                                                std::vector<int64_t> point_ids,
                                                                std::string* failure, bool check_parallax,
                                                                bool dense_schur) const {
-  const InitOptions& io = options_.init;
-  const double focal = focal_px_;
+  const InitOptions& io = s_.options.init;
+  const double focal = s_.focal_px;
   auto fail = [&](std::string why) -> std::optional<InitHypothesis> {
     if (failure) *failure = std::move(why);
     return std::nullopt;
@@ -203,14 +136,14 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   fixed.front() = true;
   geometry::PnpOptions po;
   po.focal_px = focal;
-  po.threshold_px = options_.mapping.max_reprojection_px;
+  po.threshold_px = s_.options.mapping.max_reprojection_px;
   std::vector<geometry::BundleObservation> obs;
   for (size_t w = 0; w < window.size(); ++w) {
     std::vector<Eigen::Vector3d> P;
     std::vector<Eigen::Vector2d> uv;
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features)
+    for (const FeatureUndistorted& f : s_.map.frames[window[w]].features)
       if (auto it = index.find(f.id); it != index.end()) {
-        const Eigen::Vector2d n = ideal_.PixelToNormalized(f.uv_px);
+        const Eigen::Vector2d n = s_.ideal.PixelToNormalized(f.uv_px);
         obs.push_back({static_cast<int>(w), it->second, n});
         P.push_back(h.points[it->second]);
         uv.push_back(n);
@@ -233,7 +166,7 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   }
   h.residual_correlation = detail::PooledLag1Correlation(along);
   h.median_px = UpperMedian(res);
-  h.cost = detail::CappedMeanSquarePx2(res, options_.mapping.max_reprojection_px);
+  h.cost = detail::CappedMeanSquarePx2(res, s_.options.mapping.max_reprojection_px);
   h.observations = static_cast<int>(obs.size());
   std::vector<double> z;
   for (const Eigen::Vector3d& X : h.points) z.push_back(X.z());
@@ -257,7 +190,7 @@ std::optional<System::InitHypothesis> System::RefineInitWindow(const std::vector
   return h;
 }
 
-std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<int>& window,
+std::vector<Initializer::InitHypothesis> Initializer::ValleyNeighbours(const std::vector<int>& window,
                                                               const std::vector<Eigen::Vector2d>& n1,
                                                               const std::vector<Eigen::Vector2d>& n2,
                                                               const std::vector<int64_t>& ids,
@@ -273,7 +206,7 @@ std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<i
   const double radius_deg = winner.median_parallax_deg;
   if (!(radius_deg > 0)) return {};
   geometry::RefineOptions ro;
-  ro.scale = focal_px_;
+  ro.scale = s_.focal_px;
   ro.max_iterations = 100;  // the valley is flat: some starts crawl along it before they converge
   const std::vector<geometry::RelativePoseMinimum> minima =
       geometry::RelativePoseMinima(Pose(last.q, last.t.normalized()), n1, n2, used, radius_deg, ro);
@@ -287,7 +220,7 @@ std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<i
   const double variance = std::max(minima.front().cost / static_cast<double>(used.size()), kCostFloorPx2);
   std::vector<InitHypothesis> out;
   for (auto m = minima.begin(); m != minima.end(); ++m) {
-    if (m == own || (m->cost - own->cost) / variance >= options_.init.ambiguity_chi2) continue;
+    if (m == own || (m->cost - own->cost) / variance >= s_.options.init.ambiguity_chi2) continue;
     // Cheirality decides the translation's sign: the points of the winner's inliers in front of both views.
     geometry::InFrontOfBoth best;
     Pose best_pose;
@@ -310,13 +243,13 @@ std::vector<System::InitHypothesis> System::ValleyNeighbours(const std::vector<i
   return out;
 }
 
-std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<int>& window,
+std::optional<Initializer::InitHypothesis> Initializer::SolveInitWindow(const std::vector<int>& window,
                                                               const std::vector<Eigen::Vector2d>& n1,
                                                               const std::vector<Eigen::Vector2d>& n2,
                                                               const std::vector<int64_t>& ids, int need_inliers,
                                                               int need_points, std::string* why, bool* rejected,
                                                               InlierSupply* most_inliers) const {
-  const InitOptions& io = options_.init;
+  const InitOptions& io = s_.options.init;
   auto fail = [&](std::string s, bool ambiguous) -> std::optional<InitHypothesis> {
     *why = std::move(s);
     *rejected = ambiguous;
@@ -328,18 +261,18 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   // window; the one that explains the window best is kept. With a narrow field of view two views leave a
   // near-free bas-relief direction and sometimes a twisted pair; a wrong basin cannot explain tens of views
   // as well as the right one.
-  const double focal = focal_px_;
+  const double focal = s_.focal_px;
   std::string last_failure;
   geometry::TwoViewOptions tv;
   tv.ransac_threshold_px = io.ransac_threshold_px;
   tv.focal_px = focal;
-  tv.max_reprojection_px = options_.mapping.max_reprojection_px;
+  tv.max_reprojection_px = s_.options.mapping.max_reprojection_px;
   if (most_inliers) *most_inliers = {-1, std::max(need_inliers, tv.min_inliers)};
   std::vector<geometry::TwoViewResult> seeds;
-  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, options_.seed},
-                                                                   {io.method, options_.seed + 1},
+  const std::pair<geometry::EssentialMethod, uint64_t> tries[] = {{io.method, s_.options.seed},
+                                                                   {io.method, s_.options.seed + 1},
                                                                    {geometry::EssentialMethod::kFivePointOpenCV, 0},
-                                                                   {geometry::EssentialMethod::kEightPoint, options_.seed + 2}};
+                                                                   {geometry::EssentialMethod::kEightPoint, s_.options.seed + 2}};
   bool eight_point_failed = false;  // the data refused the 8-point method: other seeds will not help
   bool five_point_tried = false;  // OpenCV's 5-point RANSAC has a fixed seed: one try is all it gives
   bool planar = false;            // a homography explains the views
@@ -462,13 +395,13 @@ std::optional<System::InitHypothesis> System::SolveInitWindow(const std::vector<
   return best;
 }
 
-int System::SharedFeatures(int s, int cur_slot) const {
+int Initializer::SharedFeatures(int s, int cur_slot) const {
   int n = 0;
-  for (const FeatureUndistorted& f : map_.frames[cur_slot].features) n += map_.frames[s].Find(f.id) != nullptr;
+  for (const FeatureUndistorted& f : s_.map.frames[cur_slot].features) n += s_.map.frames[s].Find(f.id) != nullptr;
   return n;
 }
 
-void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply,
+void Initializer::MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply,
                                   std::vector<FrameReport>* out) {
   // The tracks a reference shares with later frames only ever get fewer (a track that ends never comes back), so
   // a reference whose shared tracks gave fewer epipolar inliers than a solution needs will not give them later:
@@ -480,7 +413,7 @@ void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSuppl
   const int outliers = static_cast<int>(shared) - supply.found;
   const int wanted = supply.needed + std::max(outliers, 0);
   int best_slot = -1, best_shared = static_cast<int>(shared);
-  for (int s = reference_slot_ + 1; s < cur_slot; ++s) {
+  for (int s = s_.reference_slot + 1; s < cur_slot; ++s) {
     const int n = SharedFeatures(s, cur_slot);
     if (n >= wanted) {
       best_slot = s;
@@ -489,42 +422,42 @@ void System::MoveStarvedReference(int cur_slot, size_t shared, const InlierSuppl
     if (n > best_shared) best_slot = s, best_shared = n;
   }
   if (best_slot < 0) return;
-  reference_slot_ = best_slot;
+  s_.reference_slot = best_slot;
   out->front().note += fmt::format("; the reference shares too few tracks to give them ({} of {} fit, {} needed): "
                                    "the reference moves on to frame {}",
-                                   supply.found, shared, supply.needed, map_.frames[best_slot].index);
+                                   supply.found, shared, supply.needed, s_.map.frames[best_slot].index);
 }
 
-bool System::TryInitialise(std::vector<FrameReport>* out) {
-  const InitOptions& io = options_.init;
-  const int cur_slot = static_cast<int>(map_.frames.size()) - 1;
+bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
+  const InitOptions& io = s_.options.init;
+  const int cur_slot = static_cast<int>(s_.map.frames.size()) - 1;
   auto note = [&](std::string s) {
     FrameReport r;
     r.note = std::move(s);
     out->assign(1, r);
     return false;
   };
-  if (reference_slot_ < 0) {
-    reference_slot_ = cur_slot;
+  if (s_.reference_slot < 0) {
+    s_.reference_slot = cur_slot;
     return note("reference frame for initialisation");
   }
   // Correspondences between the reference and this frame. Forward motion (a car) and fast turns lose features
   // quickly: when too few are shared, the reference moves on to the oldest frame since it that still shares
   // enough with this one, so that the motion gathered since is kept (moving it to this frame would start over).
   const InitCounts need = NeededCounts(cur_slot);
-  Correspondences c = Correspond(reference_slot_, cur_slot);
+  Correspondences c = Correspond(s_.reference_slot, cur_slot);
   if (static_cast<int>(c.ids.size()) < need.common) {
     int next = cur_slot;
-    for (int s = reference_slot_ + 1; s < cur_slot && next == cur_slot; ++s) {
+    for (int s = s_.reference_slot + 1; s < cur_slot && next == cur_slot; ++s) {
       if (SharedFeatures(s, cur_slot) >= need.common) next = s;
     }
     const size_t had = c.ids.size();
-    reference_slot_ = next;
+    s_.reference_slot = next;
     if (next == cur_slot) return note(fmt::format("only {} features shared with the reference: new reference", had));
-    c = Correspond(reference_slot_, cur_slot);
+    c = Correspond(s_.reference_slot, cur_slot);
   }
-  const FrameRecord& ref = map_.frames[reference_slot_];
-  const FrameRecord& cur = map_.frames[cur_slot];
+  const FrameRecord& ref = s_.map.frames[s_.reference_slot];
+  const FrameRecord& cur = s_.map.frames[cur_slot];
   // A blurred frame's corners lie off where the sharp frames see them: the first map, which every later pose
   // builds on, waits for a sharp one (the rendered fast scenario with two of every ten frames blurred, seed 1,
   // initialised on its blurred frame 3 and lost the 23-point map in the next).
@@ -535,7 +468,7 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
 
   // The window: every frame from the reference to this one.
   std::vector<int> window;
-  for (int s = reference_slot_; s <= cur_slot; ++s) window.push_back(s);
+  for (int s = s_.reference_slot; s <= cur_slot; ++s) window.push_back(s);
   if (static_cast<int>(window.size()) < io.min_window_frames)
     return note(fmt::format("{} frames since the reference (the window needs {}: two views leave the depth "
                             "reversal open)",
@@ -555,8 +488,8 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
   // Gauge: the reference camera is the world; the first baseline has length 1, or the true length when
   // the ground truth is offered (--gt-scale, as the paper sets the scale by hand for its precision test).
   double baseline = 1.0;
-  if (oracle_) {
-    const std::optional<double> d = oracle_(ref.stamp_s, cur.stamp_s);
+  if (s_.oracle) {
+    const std::optional<double> d = s_.oracle(ref.stamp_s, cur.stamp_s);
     if (!d || !std::isfinite(*d) || !(*d > 0))
       throw std::runtime_error(fmt::format(
           "--gt-scale: the ground truth gives no baseline between frames {} (t = {:.6f} s) and {} (t = {:.6f} s): "
@@ -572,31 +505,31 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
     p.id = best->point_ids[i];
     p.position_in_world = best->points[i] * s;
     p.last_seen_frame = cur.index;
-    map_.Add(p);
+    s_.map.Add(p);
     depths.push_back(p.position_in_world.z());
   }
   for (size_t w = 0; w < window.size(); ++w) {
-    FrameRecord& f = map_.frames[window[w]];
+    FrameRecord& f = s_.map.frames[window[w]];
     f.has_pose = true;
     f.cam_from_world = best->poses[w];
     f.cam_from_world.t *= s;
-    map_.keyframes.push_back(window[w]);
+    s_.map.keyframes.push_back(window[w]);
   }
-  last_posed_slot_ = cur_slot;
-  BeginSettling(cur_slot, baseline, best->two_view_parallax_deg, need.points);
-  MarkSeen(cur_slot);
-  RefreshInlierFlags(cur_slot);
-  tracker_->SetTranslationFloor(options_.sigma_trans_floor_rel_depth * UpperMedian(depths));
-  initialised_ = true;
-  posed_from_ = io.pose_frames_before_reference ? PoseFramesBefore(reference_slot_, pruned_until_) : reference_slot_;
+  s_.last_posed_slot = cur_slot;
+  settler_.BeginSettling(cur_slot, baseline, best->two_view_parallax_deg, need.points);
+  s_.MarkSeen(cur_slot);
+  s_.RefreshInlierFlags(cur_slot);
+  s_.pose_step->SetTranslationFloor(s_.options.sigma_trans_floor_rel_depth * UpperMedian(depths));
+  s_.initialised = true;
+  s_.posed_from = io.pose_frames_before_reference ? PoseFramesBefore(s_.reference_slot, s_.pruned_until) : s_.reference_slot;
 
   out->clear();
-  smoother_.Reset();
+  s_.smoother.Reset();
   for (size_t w = 0; w < window.size(); ++w) {
-    FrameReport r = PosedReport(window[w]);
+    FrameReport r = s_.PosedReport(window[w]);
     r.keyframe = true;
     r.initialisation = true;
-    r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
+    r.smoothed_cam_from_world = s_.smoother.Update(r.cam_from_world);
     if (w + 1 == window.size()) {
       r.new_points = static_cast<int>(depths.size());
       r.note = fmt::format(
@@ -606,13 +539,13 @@ bool System::TryInitialise(std::vector<FrameReport>* out) {
           window.size(), best->median_px,
           best->mirrored ? " (the depth-reversed twin of the two-view solution, which explained the window better)" : "");
     }
-    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    r.map_points = s_.MapPoints();
     out->push_back(r);
   }
   // The frames before the reference: poses, unsmoothed (the smoother runs forward from the reference). After
   // the window's reports, so that the first report with a note is the one that says how the map was made.
-  for (int k = posed_from_; k < reference_slot_; ++k) {
-    FrameReport r = PosedReport(k);
+  for (int k = s_.posed_from; k < s_.reference_slot; ++k) {
+    FrameReport r = s_.PosedReport(k);
     r.initialisation = true;
     r.smoothed_cam_from_world = r.cam_from_world;
     r.note = fmt::format("posed at the initialisation (frame {}), before its reference frame", cur.index);

@@ -1,8 +1,8 @@
-// The System's bridge over the unmapped (SystemOptions::bridge): after a turn that took the map out of view ends
+// The bridge over the unmapped (bridge.h, SystemOptions::bridge): after a turn that took the map out of view ends
 // in a move, a provisional map from two views anchored at the turn's last pure-rotation frame, its scale guessed
 // from the map's depth before the turn, and its join with the map when a frame is relocalised against the map
 // again (scaled, then adjusted between its two ends).
-#include "slam/system.h"
+#include "slam/bridge.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,6 +11,11 @@
 #include <fmt/format.h>
 
 #include "core/median.h"
+#include "slam/frame_tracker.h"
+#include "slam/initializer.h"
+#include "slam/mapper.h"
+#include "slam/settler.h"
+#include "slam/slam_state.h"
 #include "slam/system_internal.h"
 
 namespace mcslam::slam {
@@ -31,7 +36,9 @@ double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 
 }  // namespace
 
-bool System::StartBridge(int slot) {
+int64_t Bridge::anchor_index() const { return s_.map.frames[state_->anchor_slot].index; }
+
+bool Bridge::Start(int slot) {
   // The anchor: the turn's last frame, unless the camera had begun to move there already. Below a quarter pixel the
   // rotation-only test cannot tell a move from the images' own wander (TrackRotationOnly), so a frame 1 cm into the
   // move can still pass as a turn; its pose (a rotation about the turn's centre) is then off by the move, and the
@@ -41,43 +48,44 @@ bool System::StartBridge(int slot) {
   // (rendered images wander 0.08-0.12 px while turning, within 1.5 times).
   constexpr double kAnchorMaxRmsOfLeast = 2.0;
   int anchor = slot - 1;
-  for (auto it = panorama_rms_px_.rbegin(); it != panorama_rms_px_.rend(); ++it) {
+  const std::vector<std::pair<int, double>>& turn = tracker_.turn_rms_px();
+  for (auto it = turn.rbegin(); it != turn.rend(); ++it) {
     if (it->first != anchor) break;  // the turn's frames, consecutive up to the last
-    if (it->second <= kAnchorMaxRmsOfLeast * panorama_min_rms_px_ || std::next(it) == panorama_rms_px_.rend()) break;
+    if (it->second <= kAnchorMaxRmsOfLeast * tracker_.turn_min_rms_px() || std::next(it) == turn.rend()) break;
     anchor = std::next(it)->first;
   }
   // The map's depth before the turn: the median depth of the map points that the latest frame posed by the pose
   // step saw.
   std::optional<double> depth;
   for (int s = anchor; s >= 0 && !depth; --s)
-    if (map_.frames[s].has_pose && map_.frames[s].pose_inliers > 0) depth = MedianDepthSeenBy(s);
+    if (s_.map.frames[s].has_pose && s_.map.frames[s].pose_inliers > 0) depth = s_.MedianDepthSeenBy(s);
   if (!depth) return false;
-  bridge_.emplace();
-  bridge_->anchor_slot = anchor;
-  bridge_->depth_prior = *depth;
+  state_.emplace();
+  state_->anchor_slot = anchor;
+  state_->depth_prior = *depth;
   return true;
 }
 
-void System::AbandonBridge(int64_t frame_index) {
-  settling_ = false;
-  for (int64_t id : bridge_->points)
-    if (MapPoint* p = map_.Find(id); p && p->state != PointState::kRemoved) {
+void Bridge::Abandon(int64_t frame_index) {
+  settler_.Stop();
+  for (int64_t id : state_->points)
+    if (MapPoint* p = s_.map.Find(id); p && p->state != PointState::kRemoved) {
       p->state = PointState::kRemoved;
       p->removed_frame = frame_index;
     }
-  bridge_.reset();
+  state_.reset();
 }
 
-std::vector<FrameReport> System::TryBridge(int slot) {
-  const InitOptions& io = options_.init;
-  const int a = bridge_->anchor_slot;
-  const FrameRecord& anchor = map_.frames[a];
-  const FrameRecord& cur = map_.frames[slot];
+std::vector<FrameReport> Bridge::Try(int slot) {
+  const InitOptions& io = s_.options.init;
+  const int a = state_->anchor_slot;
+  const FrameRecord& anchor = s_.map.frames[a];
+  const FrameRecord& cur = s_.map.frames[slot];
   FrameReport lost;
   lost.index = cur.index;
   lost.stamp_s = cur.stamp_s;
   lost.status = FrameStatus::kLost;
-  lost.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+  lost.map_points = s_.MapPoints();
   auto wait = [&](const std::string& why) {
     lost.note = "the map is out of view; a provisional map from the turn's last pure-rotation frame (" +
                 std::to_string(anchor.index) + "): " + why;
@@ -85,11 +93,11 @@ std::vector<FrameReport> System::TryBridge(int slot) {
   };
   // The tracks the anchor and this frame share (no map point: the map is out of view), and the counts the
   // initialisation asks for.
-  const Correspondences c = Correspond(a, slot);
-  const InitCounts need = NeededCounts(slot);
+  const Initializer::Correspondences c = init_.Correspond(a, slot);
+  const Initializer::InitCounts need = init_.NeededCounts(slot);
   if (static_cast<int>(c.ids.size()) < need.common) {
     std::vector<FrameReport> out = wait(fmt::format("given up, only {} tracks shared with it", c.ids.size()));
-    bridge_.reset();
+    state_.reset();
     return out;
   }
   const double med_motion = UpperMedian(c.motion_deg);
@@ -100,85 +108,85 @@ std::vector<FrameReport> System::TryBridge(int slot) {
   if (static_cast<int>(window.size()) < io.min_window_frames) return wait("too few frames since it");
   std::string why;
   bool rejected = false;
-  const std::optional<InitHypothesis> best =
-      SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected);
+  const std::optional<Initializer::InitHypothesis> best =
+      init_.SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected);
   if (!best) return wait(why);
 
   // Into the map's frame: the anchor's pose is the reference, the scale puts the points as deep as the map's were.
   std::vector<double> z;
   for (const Eigen::Vector3d& X : best->points) z.push_back(X.z());
-  const double s = bridge_->depth_prior / UpperMedian(z);
+  const double s = state_->depth_prior / UpperMedian(z);
   const Pose world_from_anchor = anchor.cam_from_world.Inverse();
   for (size_t i = 0; i < best->points.size(); ++i) {
     MapPoint p;
     p.id = best->point_ids[i];
     p.position_in_world = world_from_anchor * (s * best->points[i]);
     p.last_seen_frame = cur.index;
-    if (MapPoint* existing = map_.Find(p.id))
+    if (MapPoint* existing = s_.map.Find(p.id))
       *existing = p;  // a removed point's track, triangulated again
     else
-      map_.Add(p);
-    bridge_->points.insert(p.id);
+      s_.map.Add(p);
+    state_->points.insert(p.id);
   }
   for (size_t w = 0; w < window.size(); ++w) {
-    FrameRecord& f = map_.frames[window[w]];
+    FrameRecord& f = s_.map.frames[window[w]];
     if (w > 0) {
       f.has_pose = true;
       f.cam_from_world = Pose(best->poses[w].q, s * best->poses[w].t) * anchor.cam_from_world;
     }
-    map_.keyframes.push_back(window[w]);
+    s_.map.keyframes.push_back(window[w]);
   }
-  bridge_->built = true;
+  state_->built = true;
   // Settled as the first map is (InitOptions::settle_parallax_deg): the provisional map's frames and points refined
   // together as the parallax from the anchor grows, the anchor held and the first baseline keeping its length.
-  reference_slot_ = a;
-  posed_from_ = a;
-  BeginSettling(slot,
+  s_.reference_slot = a;
+  s_.posed_from = a;
+  settler_.BeginSettling(slot,
                 (cur.cam_from_world.OriginOfTargetInSource() - anchor.cam_from_world.OriginOfTargetInSource()).norm(),
                 best->two_view_parallax_deg, need.points);
-  last_posed_slot_ = slot;
-  panorama_bearings_.clear();
-  MarkSeen(slot);
-  RefreshInlierFlags(slot);
-  smoother_.Reset();
+  s_.last_posed_slot = slot;
+  tracker_.EndTurn();
+  s_.MarkSeen(slot);
+  s_.RefreshInlierFlags(slot);
+  s_.smoother.Reset();
   std::vector<FrameReport> out;
   for (size_t w = 1; w < window.size(); ++w) {
-    FrameReport r = PosedReport(window[w]);
+    FrameReport r = s_.PosedReport(window[w]);
     r.keyframe = true;
     r.provisional = true;
-    r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
-    r.map_points = map_.CountInState(PointState::kActive) + map_.CountInState(PointState::kLost);
+    r.smoothed_cam_from_world = s_.smoother.Update(r.cam_from_world);
+    r.map_points = s_.MapPoints();
     if (w + 1 == window.size()) {
       r.new_points = static_cast<int>(best->points.size());
       r.note = fmt::format(
           "provisional map from frames {} (the turn's last pure-rotation frame, the map out of view) and {}: {} points, median parallax "
           "{:.2f} deg, scale guessed from the map's depth before the turn ({:.3g})",
-          anchor.index, cur.index, best->points.size(), best->two_view_parallax_deg, bridge_->depth_prior);
+          anchor.index, cur.index, best->points.size(), best->two_view_parallax_deg, state_->depth_prior);
     }
     out.push_back(r);
   }
   return out;
 }
 
-std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world) {
-  FrameReport r = TrackFrame(slot, std::nullopt);  // in the provisional map
-  if (!bridging()) {  // its tracking failed: the map's pose stands (and no new bridge is needed, the map is found)
-    bridge_.reset();
-    std::vector<FrameReport> out{TrackFrame(slot, cam_from_world)};
+std::vector<FrameReport> Bridge::Join(int slot, const Pose& cam_from_world) {
+  FrameReport r = tracker_.TrackFrame(slot, std::nullopt);  // in the provisional map
+  if (!active()) {  // its tracking failed: the map's pose stands (and no new bridge is needed, the map is found)
+    state_.reset();
+    std::vector<FrameReport> out{tracker_.TrackFrame(slot, cam_from_world)};
     out.front().note += "; relocalised in the map after the provisional map was lost";
     return out;
   }
-  const FrameRecord& anchor = map_.frames[bridge_->anchor_slot];
+  const FrameRecord& anchor = s_.map.frames[state_->anchor_slot];
   const Eigen::Vector3d c_anchor = anchor.cam_from_world.OriginOfTargetInSource();
-  const Eigen::Vector3d in_bridge = map_.frames[slot].cam_from_world.OriginOfTargetInSource() - c_anchor;
+  const Eigen::Vector3d in_bridge = s_.map.frames[slot].cam_from_world.OriginOfTargetInSource() - c_anchor;
   const Eigen::Vector3d in_map = cam_from_world.OriginOfTargetInSource() - c_anchor;
-  const double rotation_deg = AngularDistanceDeg(map_.frames[slot].cam_from_world.q, cam_from_world.q);
+  const double rotation_deg = AngularDistanceDeg(s_.map.frames[slot].cam_from_world.q, cam_from_world.q);
   const double direction_deg = AngleDeg(in_bridge, in_map);
   const double ratio = in_bridge.norm() > 0 ? in_map.norm() / in_bridge.norm() : 0.0;
   std::string refused;
   if (rotation_deg > detail::kJoinMaxRotationDeg)
     refused = fmt::format("orientations {:.1f} deg apart", rotation_deg);
-  else if (in_map.norm() < kJoinMinMoveOfDepth * bridge_->depth_prior)
+  else if (in_map.norm() < kJoinMinMoveOfDepth * state_->depth_prior)
     refused = fmt::format("the camera moved {:.3g} from the anchor, too little to scale by", in_map.norm());
   else if (direction_deg > kJoinMaxDirectionDeg)
     refused = fmt::format("the moves from the anchor {:.1f} deg apart", direction_deg);
@@ -188,52 +196,52 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
     r.note += (r.note.empty() ? "" : "; ") + fmt::format("relocalised in the map but not joined: {}", refused);
     return {r};
   }
-  settling_ = false;
+  settler_.Stop();
   // Scale the provisional map about the anchor's centre.
   auto scaled = [&](const Eigen::Vector3d& x) -> Eigen::Vector3d { return c_anchor + ratio * (x - c_anchor); };
-  for (int64_t id : bridge_->points)
-    if (MapPoint* p = map_.Find(id); p && p->state != PointState::kRemoved) p->position_in_world = scaled(p->position_in_world);
+  for (int64_t id : state_->points)
+    if (MapPoint* p = s_.map.Find(id); p && p->state != PointState::kRemoved) p->position_in_world = scaled(p->position_in_world);
   std::vector<FrameReport> out;
-  smoother_.Reset();
-  for (int k = bridge_->anchor_slot + 1; k <= slot; ++k) {
-    FrameRecord& f = map_.frames[k];
+  s_.smoother.Reset();
+  for (int k = state_->anchor_slot + 1; k <= slot; ++k) {
+    FrameRecord& f = s_.map.frames[k];
     if (f.has_pose) f.cam_from_world.t = -(f.cam_from_world.q * scaled(f.cam_from_world.OriginOfTargetInSource()));
   }
   // The frame posed again from the relocalised pose, by the pose step on every point it sees: the provisional
   // map's rotation drifted a little while it was alone (degrees), and the points of the map must score the next
   // frame too.
-  FrameRecord& fr = map_.frames[slot];
+  FrameRecord& fr = s_.map.frames[slot];
   std::vector<PointObservation> obs;
   for (const FeatureUndistorted& f : fr.features)
-    if (const MapPoint* p = map_.Find(f.id); p && p->state != PointState::kRemoved)
+    if (const MapPoint* p = s_.map.Find(f.id); p && p->state != PointState::kRemoved)
       obs.push_back({p->position_in_world, f.uv_px, true});
   std::vector<double> res;
   std::vector<uint8_t> inl;
-  tracker_->ClassifyInliers(cam_from_world, obs, &res, &inl);
+  s_.pose_step->ClassifyInliers(cam_from_world, obs, &res, &inl);
   for (size_t i = 0; i < obs.size(); ++i) obs[i].was_inlier = inl[i] != 0;
-  if (const PoseEstimate est = tracker_->Track(cam_from_world, obs, static_cast<uint64_t>(fr.index), &res, &inl);
+  if (const PoseEstimate est = s_.pose_step->Track(cam_from_world, obs, static_cast<uint64_t>(fr.index), &res, &inl);
       est.tracked) {
     fr.cam_from_world = est.cam_from_world;
     fr.pose_inliers = est.inliers;
     r.inliers = est.inliers;
   }
-  const int adjusted = AdjustJoinedBridge(slot, &r);
-  for (int k = bridge_->anchor_slot + 1; k < slot; ++k)
-    if (map_.frames[k].has_pose) {
-      FrameReport u = PosedReport(k);
+  const int adjusted = AdjustJoined(slot, &r);
+  for (int k = state_->anchor_slot + 1; k < slot; ++k)
+    if (s_.map.frames[k].has_pose) {
+      FrameReport u = s_.PosedReport(k);
       u.pose_update = true;
       u.joined = true;
       out.push_back(u);
     }
-  bridge_.reset();
+  state_.reset();
   // A turn under way was about a centre in the provisional map, which the join has just moved: the next turn
   // starts afresh from this frame.
-  panorama_bearings_.clear();
-  RefreshInlierFlags(slot);
-  r.cam_from_world = map_.frames[slot].cam_from_world;
-  r.smoothed_cam_from_world = smoother_.Update(r.cam_from_world);
+  tracker_.EndTurn();
+  s_.RefreshInlierFlags(slot);
+  r.cam_from_world = s_.map.frames[slot].cam_from_world;
+  r.smoothed_cam_from_world = s_.smoother.Update(r.cam_from_world);
   r.joined = true;
-  ResidualStats(slot, &r);
+  s_.ResidualStats(slot, &r);
   r.note += (r.note.empty() ? "" : "; ") +
             fmt::format("relocalised in the map: the provisional map joins it, scaled by {:.3f} (moves {:.1f} deg "
                         "apart, orientations {:.1f} deg), {} of its keyframes adjusted between the anchor and this frame",
@@ -242,7 +250,7 @@ std::vector<FrameReport> System::JoinBridge(int slot, const Pose& cam_from_world
   return out;
 }
 
-int System::AdjustJoinedBridge(int slot, FrameReport* r) {
+int Bridge::AdjustJoined(int slot, FrameReport* r) {
   // Scaled, the provisional map still carries what its two views and its tracking alone got wrong: the direction
   // of the move and a drift of its orientation (the join accepts up to kJoinMaxDirectionDeg and
   // detail::kJoinMaxRotationDeg), all of it showing at the joining frame. Now that both its ends are known in the map (the
@@ -250,11 +258,11 @@ int System::AdjustJoinedBridge(int slot, FrameReport* r) {
   // as the local adjustment's) with the anchor and every point of the map held fixed, which spreads that error
   // over the bridge instead of leaving it at its end. Rotation scenario, seed 1: the bridge's frames were 5-9 cm
   // off after the scaling alone (the rest 2-3 cm).
-  const MappingOptions& mo = options_.mapping;
-  const int a = bridge_->anchor_slot;
+  const MappingOptions& mo = s_.options.mapping;
+  const int a = state_->anchor_slot;
   std::vector<int> window;
-  for (int k : map_.keyframes)
-    if (k >= a && k < slot && map_.frames[k].has_pose) window.push_back(k);
+  for (int k : s_.map.keyframes)
+    if (k >= a && k < slot && s_.map.frames[k].has_pose) window.push_back(k);
   std::sort(window.begin(), window.end());
   window.erase(std::unique(window.begin(), window.end()), window.end());
   if (window.empty() || window.front() != a) return 0;
@@ -263,18 +271,18 @@ int System::AdjustJoinedBridge(int slot, FrameReport* r) {
   // places a frame: the joining frame sees the map's points only once).
   std::unordered_map<int64_t, int> count, index;
   for (int k : window)
-    for (const FeatureUndistorted& f : map_.frames[k].features) ++count[f.id];
+    for (const FeatureUndistorted& f : s_.map.frames[k].features) ++count[f.id];
   WindowPoints wp;
   std::vector<bool> fixed_points;
   for (size_t w = 0; w < window.size(); ++w)
-    for (const FeatureUndistorted& f : map_.frames[window[w]].features) {
-      MapPoint* p = map_.Find(f.id);
+    for (const FeatureUndistorted& f : s_.map.frames[window[w]].features) {
+      MapPoint* p = s_.map.Find(f.id);
       if (!p || p->state == PointState::kRemoved) continue;
-      const bool held = !bridge_->points.count(f.id) || loaded_points_.count(f.id) > 0;
+      const bool held = !state_->points.count(f.id) || s_.loaded_points.count(f.id) > 0;
       if (!held && count[f.id] < 2) continue;
       auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
       if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world), fixed_points.push_back(held);
-      wp.obs.push_back({static_cast<int>(w), it->second, ideal_.PixelToNormalized(f.uv_px)});
+      wp.obs.push_back({static_cast<int>(w), it->second, s_.ideal.PixelToNormalized(f.uv_px)});
     }
   // Each adjusted pose held by at least as many points as the pose step needs to track a frame, and the joining
   // frame seeing at least one of the bridge's own points: where it sees none (the join came in a turn that took
@@ -288,19 +296,19 @@ int System::AdjustJoinedBridge(int slot, FrameReport* r) {
     ++seen[static_cast<size_t>(o.camera)];
     joining_sees_bridge += o.camera + 1 == static_cast<int>(window.size()) && !fixed_points[static_cast<size_t>(o.point)];
   }
-  if (*std::min_element(seen.begin() + 1, seen.end()) < options_.tracker.min_inliers ||
+  if (*std::min_element(seen.begin() + 1, seen.end()) < s_.options.tracker.min_inliers ||
       joining_sees_bridge < 1)
     return 0;
   std::vector<bool> fixed(window.size(), false);
   fixed[0] = true;
   std::vector<Pose> cams, before;
-  for (int k : window) cams.push_back(map_.frames[k].cam_from_world);
+  for (int k : window) cams.push_back(s_.map.frames[k].cam_from_world);
   before = cams;
   geometry::BundleAdjustOptions bo;
-  bo.focal_px = focal_px_;
+  bo.focal_px = s_.focal_px;
   bo.cauchy = true;
-  bo.huber_px = std::max(mo.local_ba_min_loss_px, mo.local_ba_loss_sigmas * RecentNoisePx().value_or(1.0));
-  bo.max_iterations = 5 * options_.ba_iterations;  // the error spreads along a chain of tens of keyframes
+  bo.huber_px = std::max(mo.local_ba_min_loss_px, mo.local_ba_loss_sigmas * mapper_.RecentNoisePx().value_or(1.0));
+  bo.max_iterations = 5 * s_.options.ba_iterations;  // the error spreads along a chain of tens of keyframes
   std::vector<Eigen::Vector3d> X_before = wp.X;
   geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo, fixed_points);
   // Few ties (one point, say) and a wrong one among them: the adjustment may move the bridge further than its own
@@ -316,14 +324,14 @@ int System::AdjustJoinedBridge(int slot, FrameReport* r) {
   size_t w = 0;
   for (int k = a + 1; k <= slot; ++k) {
     while (w + 1 < window.size() && window[w + 1] <= k) ++w;
-    FrameRecord& f = map_.frames[k];
+    FrameRecord& f = s_.map.frames[k];
     if (!f.has_pose) continue;
     if (window[w] == k)
       f.cam_from_world = cams[w];
     else  // the same correction of the world as its keyframe's
       f.cam_from_world = f.cam_from_world * (before[w].Inverse() * cams[w]);
   }
-  r->removed += StoreAdjustedPoints(cams, wp, map_.frames[slot].index);
+  r->removed += s_.StoreAdjustedPoints(cams, wp, s_.map.frames[slot].index);
   return static_cast<int>(window.size()) - 1;
 }
 
