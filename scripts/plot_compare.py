@@ -284,7 +284,7 @@ def findings(inputs, machine, seeds_note):
                     f"{title}, {structure_name} structure: the PnP pose step made fewer keyframes than the Monte Carlo "
                     f"one (" + ", ".join(f"seed {s}: {a} against {b}" for s, a, b in fewer) + "). A frame is a keyframe "
                     f"when its inliers are at least {KEYFRAME_RATIO} x its scored points, and the PnP step "
-                    f"(slam/system.cc, System::EstimatePosePnp) counts every observed map point as scored where the "
+                    f"(slam/frame_tracker.cc, FrameTracker::EstimatePosePnp) counts every observed map point as scored where the "
                     f"Monte Carlo step counts only the points that were inliers in the previous frame; with fewer "
                     f"keyframes no new points are made in between, and the map thins out.")
         lines.append(text + (". Time: " + "; ".join(times) if times else "") + ".")

@@ -20,8 +20,8 @@ class Settler;
 class FrameTracker;
 class Mapper;
 
-// The System's bridge over the unmapped (SystemOptions::bridge), from a turn's last frame to where the map is
-// found again. (Outside System: clang 14 cannot construct a nested struct with member initialisers in an optional.)
+// The provisional map of a Bridge, from a turn's last frame to where the map is found again. (Outside Bridge:
+// clang 14 cannot construct a nested struct with member initialisers in an optional.)
 struct BridgeState {
   int anchor_slot = -1;    // the turn's last frame: its pose is the provisional map's reference
   double depth_prior = 0;  // the map's median depth before the turn: the guessed scale

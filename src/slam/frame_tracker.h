@@ -30,8 +30,8 @@ class FrameTracker {
   // Poses frame `slot` from the last posed frame, or from pose_hint (a relocalisation): its report.
   FrameReport TrackFrame(int slot, const std::optional<Pose>& pose_hint);
 
-  // The turn under way (rotation-only frames since the pose step last had points): each of its frames (slot) and
-  // its residual (px rms), in order, and the least of them.
+  // The last turn (under way, or ended by the frame just lost): each of its rotation-only frames (slot) and its
+  // residual (px rms), in order, and the least of them.
   const std::vector<std::pair<int, double>>& turn_rms_px() const { return panorama_rms_px_; }
   double turn_min_rms_px() const { return panorama_min_rms_px_; }
   // A later turn starts afresh (its centre found again).

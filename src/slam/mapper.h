@@ -33,7 +33,7 @@ class Mapper {
   Mapper(SlamState& s, Bridge& bridge, const Settler& settler, PointAdjuster& adjuster);
   ~Mapper();  // waits for a local bundle adjustment still being solved (MappingOptions::local_ba_async)
 
-  // The next frame into the history: its features undistorted (those that cannot be dropped), under the map
+  // The next frame into the history: its features undistorted (those that cannot be are dropped), under the map
   // point's id where their track was merged into one, sorted by id; older frames' features pruned. Returns its slot.
   int AddFrame(const FrameObservations& frame);
   // A new keyframe `slot` (posed from `inliers` points): new points, then the refinement after them; *r gets the
@@ -42,7 +42,8 @@ class Mapper {
   // MappingOptions::local_ba_async: waits for the last keyframe's local bundle adjustment and applies it; that
   // keyframe's revised report (none when nothing is pending).
   std::optional<FrameReport> ApplyPending();
-  // The report Process returned for frame `index` completes the pending adjustment's (when it is that frame's).
+  // The report the System returns for the frame that started the pending adjustment completes that adjustment's
+  // (nothing when none is pending; the caller passes that frame's report).
   void SetPendingReport(const FrameReport& r);
   // The tracks' noise sigma (px, per coordinate) from the map's residuals in the recent keyframes; nullopt before
   // any keyframe has measured one.

@@ -121,7 +121,7 @@ void Settler::Settle(int slot, std::vector<FrameReport>* out) {
   s_.RefreshInlierFlags(slot);  // at the moved current pose
   // The posed frames left out of the adjustment, and those before the reference: each placed again against
   // the adjusted points (PnP from the points it sees; for a frame before the reference, with the agreement it
-  // was first placed with, and following the frame after it, which is placed first: Settler::FollowsFrom), or
+  // was first placed with, and following the frame after it, which is placed first: Initializer::FollowsFrom), or
   // else moved with its neighbour in the window: for a frame before the reference, which stays the world, only
   // the scale changes.
   std::vector<int> left_out;

@@ -42,11 +42,13 @@ struct SlamState {
   std::unique_ptr<PoseTracker> pose_step;  // §5, from construction (System); its translation floor set at initialisation
   PoseSmoother smoother;
   std::function<std::optional<double>(double, double)> oracle;  // --gt-scale: the true baseline between two stamps
-  // The points of a map this run started in (System::StartInMap): the adjustments hold them fixed.
+  // The points of a map this run started in (System::StartInMap): the adjustments hold them fixed, and the map is
+  // never dropped for a new one (System::MaybeRestart).
   std::unordered_set<int64_t> loaded_points;
 
   bool initialised = false;
-  int reference_slot = -1;   // the initialisation's first frame (and a provisional map's anchor while it settles)
+  // The initialisation's reference frame (moved on while it waits), then a provisional map's anchor once one is made.
+  int reference_slot = -1;
   int last_posed_slot = -1;
   int posed_from = -1;       // the first posed slot: the reference, or a frame before it (pose_frames_before_reference)
   int pruned_until = 0;      // frames before this slot have dropped their features (MappingOptions::history_frames)

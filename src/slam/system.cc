@@ -136,12 +136,12 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   const auto current = std::find_if(now.begin(), now.end(), [&](const FrameReport& r) { return r.index == frame.index; });
   const bool lost = current != now.end() && current->status == FrameStatus::kLost;
   lost_run_ = lost ? lost_run_ + 1 : 0;
-  const SlamState& s = st_->state;
-  if (!lost || s.options.restart_min_lost_frames == 0 || !s.loaded_points.empty() ||
-      lost_run_ < s.options.restart_min_lost_frames)
+  const SystemOptions& options = st_->state.options;
+  if (!lost || options.restart_min_lost_frames == 0 || !st_->state.loaded_points.empty() ||
+      lost_run_ < options.restart_min_lost_frames)
     return now;
   std::vector<const FrameRecord*> posed;
-  for (const FrameRecord& f : s.map.frames)
+  for (const FrameRecord& f : st_->state.map.frames)
     if (f.has_pose) posed.push_back(&f);
   if (posed.empty() || lost_run_ <= static_cast<int>(posed.size())) return now;
   // Its pending adjustment is applied first (its thread reads the map); its revised report goes with the map.
@@ -181,8 +181,8 @@ std::vector<FrameReport> System::MaybeRestart(const FrameObservations& frame, st
   std::unique_ptr<compute::PointKernel> point_kernel = st_->adjuster.ReleaseKernel();
   auto oracle = std::move(st_->state.oracle);
   const int restarts = restarts_ + 1;
-  const SystemOptions options = st_->state.options;
-  *this = System(given_camera_, options, std::move(pose_kernel), std::move(point_kernel));
+  const SystemOptions kept_options = options;  // (the stages, options included, go with the old System)
+  *this = System(given_camera_, kept_options, std::move(pose_kernel), std::move(point_kernel));
   st_->state.oracle = std::move(oracle);
   restarts_ = restarts;
   dropped_reports_ = std::move(pending);

@@ -82,6 +82,8 @@ class System {
   // A point the pose step and the remapping may use now: any, or while a provisional map is tracked only its own
   // (the rest of the map is at another scale).
   bool AtCurrentScale(int64_t point_id) const;
+  // (This reference, and those of merged_tracks, camera, self_calibration and result_map, hold until the next Process,
+  // Flush or Finish: a restart replaces the map and the stages that keep them.)
   const Map& map() const;
   // The tracks that went on as an older map point in the last Process (MappingOptions::merge_revisited_points):
   // (track id, map point id) pairs. The System already takes the track's features under the point's id; a
@@ -95,7 +97,8 @@ class System {
   int restarts() const { return restarts_; }
 
  private:
-  // The stages and what they share, on the heap: they point at each other, and a restart moves them whole.
+  // The stages and what they share, on the heap: they refer to each other. A restart replaces them (and the map)
+  // with new ones.
   struct Stages;
   std::vector<FrameReport> ProcessFrame(const FrameObservations& frame);
   int PosedFrames() const;
