@@ -102,6 +102,10 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--load-map", o->load_map_path,
                   "Start in the map of an earlier run (--save-map): relocalise in it, then track and extend it in its "
                   "frame and scale");
+  cmd->add_option("--save-tracks", o->save_tracks_dir,
+                  "Write the front end's tracks into this folder as observations (observations.txt, camera.yaml): "
+                  "`mcslam run FOLDER` runs the back end alone on them, scripts/track_quality.py measures them against "
+                  "a ground truth");
   cmd->add_flag("--viewer", o->viewer,
                 "Also write viewer.html: the map, the trajectory and the per-frame figures in a browser (three.js)");
   cmd->add_flag("--timings", o->timings,
@@ -236,6 +240,14 @@ void ImageRun::Setup(const slam::SystemOptions& system_in) {
     video_fps = vs->fps();
   }
   if (!options.overlay_path.empty()) overlay = std::make_unique<Overlay>(options.overlay_path, camera, video_fps);
+  if (!options.save_tracks_dir.empty()) {
+    const fs::path dir(options.save_tracks_dir);
+    fs::create_directories(dir, ec);
+    if (!fs::is_directory(dir, ec))
+      throw std::runtime_error(fmt::format("--save-tracks {}: cannot create the folder", options.save_tracks_dir));
+    io::WriteCameraYaml((dir / "camera.yaml").string(), camera, video_fps);
+    tracks_out = std::make_unique<io::ObservationWriter>((dir / "observations.txt").string());
+  }
 
   pipeline::VisualSlamOptions vs_opts;
   vs_opts.frontend = options.frontend;
@@ -322,6 +334,12 @@ void ImageRun::RunFrames() {
     pending.pop_front();
     FrameRow& row = p.row;
     const frontend::FrameResult& fr = step.frontend;
+    if (tracks_out) {
+      io::ObservationFrame of{fr.index, fr.stamp_s, {}};
+      of.observations.reserve(fr.features.size());
+      for (const frontend::TrackedFeature& f : fr.features) of.observations.push_back({f.feature_id, f.uv_px.x(), f.uv_px.y()});
+      tracks_out->Append(of);
+    }
     row.fe = fr.stats;
     row.features = static_cast<int>(fr.features.size());
     row.lost_tracks = static_cast<int>(fr.lost.size());
@@ -494,6 +512,27 @@ void ImageRun::WriteOutputs() {
   WriteReport();
   WritePlot();
   if (overlay) overlay.reset();  // closes the file
+  if (tracks_out) {
+    try {
+      tracks_out->Close();
+      // The ground truth beside them, so that the folder runs and evaluates as it is. Without stamps (a KITTI
+      // poses file), pose i is frame i: each processed frame's pose takes the frame's stamp.
+      if (gt) {
+        io::Trajectory g;
+        if (gt->has_stamps) {
+          g = *gt;
+        } else {
+          for (const FrameRow& row : rows)
+            if (!row.skipped && row.index >= 0 && static_cast<size_t>(row.index) < gt->size())
+              g.stamps_s.push_back(row.stamp_s), g.world_from_cam.push_back(gt->world_from_cam[row.index]);
+        }
+        io::WriteTum((fs::path(options.save_tracks_dir) / "groundtruth.txt").string(), g);
+      }
+    } catch (const std::exception& e) {
+      if (failure.empty()) failure = fmt::format("--save-tracks: {}", e.what());
+    }
+    tracks_out.reset();
+  }
 }
 
 // A map that cannot be written loses nothing else: the failure is the run's, reported after every output.

@@ -38,6 +38,10 @@ struct ImageJobOptions {
   // Map files (io/map_file.h): the map written at the end of the run; a map of an earlier run to start in
   // (relocalised against it, then extended, in its frame and scale).
   std::string save_map_path, load_map_path;
+  // A folder of observations (observations.txt, camera.yaml) holding the front end's tracks of every processed
+  // frame: `mcslam run` on it runs the back end alone on the same tracks (no relocalisation: descriptors are not
+  // kept), and scripts/track_quality.py measures them against a ground truth. Empty: none.
+  std::string save_tracks_dir;
   bool viewer = false;  // also write viewer.html (apps/viewer.h) into the output folder
   bool timings = false; // print the per-stage time table after the summary line (StageTable)
   frontend::FrontendOptions frontend;

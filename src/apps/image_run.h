@@ -18,6 +18,7 @@
 #include "eval/trajectory_eval.h"
 #include "io/datasets.h"
 #include "io/map_file.h"
+#include "io/observations_io.h"
 #include "io/trajectory_io.h"
 #include "pipeline/visual_slam.h"
 
@@ -43,6 +44,7 @@ struct ImageRun {
   frontend::FrontendOptions fe_opts;
   std::unique_ptr<pipeline::VisualSlam> vslam;
   std::unique_ptr<Overlay> overlay;
+  std::unique_ptr<io::ObservationWriter> tracks_out;  // --save-tracks: the front end's tracks, frame by frame
   std::filesystem::path out;
   int64_t last = -1;  // the last frame to process, when known
   // RunFrames.

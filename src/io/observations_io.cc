@@ -1,6 +1,8 @@
 #include "io/observations_io.h"
 
 #include <cmath>
+#include <optional>
+#include <utility>
 #include <stdexcept>
 #include <unordered_set>
 
@@ -51,36 +53,54 @@ std::vector<ObservationFrame> ReadObservations(const std::string& path) {
   return frames;
 }
 
-void WriteObservations(const std::string& path, const std::vector<ObservationFrame>& frames) {
-  // Refuse what ReadObservations would refuse, so that every written file reads back.
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const ObservationFrame& f = frames[i];
-    if (f.index < 0 || (i > 0 && f.index <= frames[i - 1].index))
-      throw std::invalid_argument(fmt::format("{}: frame indices must be non-negative and increasing (frame {} has "
-                                              "index {})",
-                                              path, i, f.index));
-    if (!std::isfinite(f.stamp_s))
-      throw std::invalid_argument(fmt::format("{}: frame {} has a non-finite timestamp", path, f.index));
-    if (i > 0 && f.stamp_s < frames[i - 1].stamp_s)
-      throw std::invalid_argument(fmt::format("{}: the timestamp of frame {} goes back in time", path, f.index));
-    std::unordered_set<int64_t> ids;
-    for (const Observation& o : f.observations) {
-      if (!std::isfinite(o.u_px) || !std::isfinite(o.v_px))
-        throw std::invalid_argument(
-            fmt::format("{}: feature {} in frame {} has a non-finite position", path, o.feature_id, f.index));
-      if (!ids.insert(o.feature_id).second)
-        throw std::invalid_argument(fmt::format("{}: feature {} is observed twice in frame {}", path, o.feature_id, f.index));
-    }
+namespace {
+
+// What ReadObservations would refuse in frame f after a frame (index, stamp) when `after` holds one: throws
+// std::invalid_argument naming the file and the frame.
+void CheckFrame(const std::string& path, const ObservationFrame& f, const std::optional<std::pair<int64_t, double>>& after) {
+  if (f.index < 0 || (after && f.index <= after->first))
+    throw std::invalid_argument(
+        fmt::format("{}: frame indices must be non-negative and increasing (frame index {} after {})", path, f.index,
+                    after ? fmt::format("{}", after->first) : std::string("none")));
+  if (!std::isfinite(f.stamp_s))
+    throw std::invalid_argument(fmt::format("{}: frame {} has a non-finite timestamp", path, f.index));
+  if (after && f.stamp_s < after->second)
+    throw std::invalid_argument(fmt::format("{}: the timestamp of frame {} goes back in time", path, f.index));
+  std::unordered_set<int64_t> ids;
+  for (const Observation& o : f.observations) {
+    if (!std::isfinite(o.u_px) || !std::isfinite(o.v_px))
+      throw std::invalid_argument(
+          fmt::format("{}: feature {} in frame {} has a non-finite position", path, o.feature_id, f.index));
+    if (!ids.insert(o.feature_id).second)
+      throw std::invalid_argument(fmt::format("{}: feature {} is observed twice in frame {}", path, o.feature_id, f.index));
   }
-  std::ofstream out = detail::OpenForWrite(path);
-  out << "# frame_index timestamp_s feature_id u_px v_px (distorted pixels); 2 columns: a frame with no observation\n";
-  for (const ObservationFrame& f : frames) {
-    const std::string stamp = detail::FormatStamp(f.stamp_s);
-    if (f.observations.empty()) out << fmt::format("{} {}\n", f.index, stamp);
-    for (const Observation& o : f.observations)
-      out << fmt::format("{} {} {} {:.17g} {:.17g}\n", f.index, stamp, o.feature_id, o.u_px, o.v_px);
-  }
-  detail::FinishWrite(out, path);
 }
+
+}  // namespace
+
+void WriteObservations(const std::string& path, const std::vector<ObservationFrame>& frames) {
+  // Everything is checked before the file is touched: a refused write leaves an existing file as it was.
+  for (size_t i = 0; i < frames.size(); ++i)
+    CheckFrame(path, frames[i], i == 0 ? std::nullopt
+                                       : std::optional<std::pair<int64_t, double>>({frames[i - 1].index, frames[i - 1].stamp_s}));
+  ObservationWriter writer(path);
+  for (const ObservationFrame& f : frames) writer.Append(f);
+  writer.Close();
+}
+
+ObservationWriter::ObservationWriter(std::string path) : path_(std::move(path)), out_(detail::OpenForWrite(path_)) {
+  out_ << "# frame_index timestamp_s feature_id u_px v_px (distorted pixels); 2 columns: a frame with no observation\n";
+}
+
+void ObservationWriter::Append(const ObservationFrame& f) {
+  CheckFrame(path_, f, last_);
+  const std::string stamp = detail::FormatStamp(f.stamp_s);
+  if (f.observations.empty()) out_ << fmt::format("{} {}\n", f.index, stamp);
+  for (const Observation& o : f.observations)
+    out_ << fmt::format("{} {} {} {:.17g} {:.17g}\n", f.index, stamp, o.feature_id, o.u_px, o.v_px);
+  last_ = {f.index, f.stamp_s};
+}
+
+void ObservationWriter::Close() { detail::FinishWrite(out_, path_); }
 
 }  // namespace mcslam::io

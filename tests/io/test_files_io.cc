@@ -347,5 +347,26 @@ TEST(Observations, WriterRefusesWhatTheReaderWould) {
   EXPECT_THROW(WriteObservations(dir / "o.txt", frames), std::invalid_argument);
 }
 
+// The writer a run appends to frame by frame (mcslam run --save-tracks): what it appended reads back as the batch
+// writer's file would, a frame it refuses leaves what came before it readable, and a refused batch write leaves
+// the file it would have replaced as it was.
+TEST(Observations, FrameByFrameWriterMatchesTheBatchWriterAndKeepsWhatCameBefore) {
+  TempDir dir;
+  const auto frames = MakeObservations();
+  WriteObservations(dir / "batch.txt", frames);
+  {
+    ObservationWriter w(dir / "appended.txt");
+    for (const auto& f : frames) w.Append(f);
+    ObservationFrame back = frames.front();  // an index that goes back
+    ExpectThrowsWith([&] { w.Append(back); }, dir / "appended.txt", "increasing");
+    w.Close();
+  }
+  EXPECT_EQ(ReadText(dir / "appended.txt"), ReadText(dir / "batch.txt"));
+  auto bad = frames;
+  bad[1].observations[0].u_px = std::nan("");
+  EXPECT_THROW(WriteObservations(dir / "batch.txt", bad), std::invalid_argument);
+  EXPECT_EQ(ReadObservations(dir / "batch.txt").size(), frames.size());
+}
+
 }  // namespace
 }  // namespace mcslam::io
