@@ -63,6 +63,11 @@ TEST(CliRun, SavedTracksReplayTheBackEndExactly) {
   const std::string image_run = testing::ReadText(dir / "r/trajectory.txt");
   EXPECT_FALSE(image_run.empty());
   EXPECT_EQ(testing::ReadText(dir / "b/trajectory.txt"), image_run);
+  // A folder that cannot be made is refused before any frame, naming the flag.
+  const auto bad = RunMcslam("run " + dir / "s --dataset synthetic --save-tracks " + dir / "t/observations.txt/x" +
+                             " --out " + dir / "bad");
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("--save-tracks"), std::string::npos) << bad.output;
 }
 
 // The target for the rendered paper scenario (`make demo`): the whole 300-frame sequence from its
