@@ -76,6 +76,17 @@ void CheckFrame(const std::string& path, const ObservationFrame& f, const std::o
   }
 }
 
+constexpr char kHeader[] =
+    "# frame_index timestamp_s feature_id u_px v_px (distorted pixels); 2 columns: a frame with no observation\n";
+
+// One frame's lines (a frame with no observation: its index and stamp only); the frame was checked.
+void WriteFrame(std::ostream& out, const ObservationFrame& f) {
+  const std::string stamp = detail::FormatStamp(f.stamp_s);
+  if (f.observations.empty()) out << fmt::format("{} {}\n", f.index, stamp);
+  for (const Observation& o : f.observations)
+    out << fmt::format("{} {} {} {:.17g} {:.17g}\n", f.index, stamp, o.feature_id, o.u_px, o.v_px);
+}
+
 }  // namespace
 
 void WriteObservations(const std::string& path, const std::vector<ObservationFrame>& frames) {
@@ -83,21 +94,19 @@ void WriteObservations(const std::string& path, const std::vector<ObservationFra
   for (size_t i = 0; i < frames.size(); ++i)
     CheckFrame(path, frames[i], i == 0 ? std::nullopt
                                        : std::optional<std::pair<int64_t, double>>({frames[i - 1].index, frames[i - 1].stamp_s}));
-  ObservationWriter writer(path);
-  for (const ObservationFrame& f : frames) writer.Append(f);
-  writer.Close();
+  std::ofstream out = detail::OpenForWrite(path);
+  out << kHeader;
+  for (const ObservationFrame& f : frames) WriteFrame(out, f);
+  detail::FinishWrite(out, path);
 }
 
 ObservationWriter::ObservationWriter(std::string path) : path_(std::move(path)), out_(detail::OpenForWrite(path_)) {
-  out_ << "# frame_index timestamp_s feature_id u_px v_px (distorted pixels); 2 columns: a frame with no observation\n";
+  out_ << kHeader;
 }
 
 void ObservationWriter::Append(const ObservationFrame& f) {
   CheckFrame(path_, f, last_);
-  const std::string stamp = detail::FormatStamp(f.stamp_s);
-  if (f.observations.empty()) out_ << fmt::format("{} {}\n", f.index, stamp);
-  for (const Observation& o : f.observations)
-    out_ << fmt::format("{} {} {} {:.17g} {:.17g}\n", f.index, stamp, o.feature_id, o.u_px, o.v_px);
+  WriteFrame(out_, f);
   last_ = {f.index, f.stamp_s};
 }
 
