@@ -292,8 +292,9 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   if (!res.initialised)
     throw ExitError(kExitNotInitialised, fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
-        "move by a median of {} deg with enough parallax between two frames",
-        res.reports.size(), a.out, options.init.min_median_motion_deg));
+        "move by a median of {} deg (or {} px that no turn of the camera explains) with enough parallax between two "
+        "frames",
+        res.reports.size(), a.out, options.init.min_median_motion_deg, options.init.min_nonrotational_motion_px));
 }
 
 void Run(const RunArgs& a) {
@@ -412,6 +413,11 @@ void RegisterRun(CLI::App& app) {
                   "Median feature motion (angle between a feature's rays in two frames) that starts the "
                   "initialisation")
       ->check(Between(1e-6, 89.0))
+      ->capture_default_str();
+  cmd->add_option("--init-nonrot-px", args->system.init.min_nonrotational_motion_px,
+                  "... or the median motion that no turn of the camera explains, in pixels, that starts it (a camera "
+                  "circling what it looks at; 0: the median motion alone)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--pose", args->pose_method, "Pose step: mc (Monte Carlo, the paper) or pnp (RANSAC PnP + LM, baseline)")
       ->check(CLI::IsMember({"mc", "pnp"}))

@@ -625,8 +625,10 @@ ImageJobSummary ImageRun::Finish() {
   if (!sum.initialised)
     throw ExitError(kExitNotInitialised, fmt::format(
         "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "
-        "median of {:.2f} deg with a median parallax of {:.1f} deg between two frames (last: {})",
-        frames_processed, out_dir, sys_opts.init.min_median_motion_deg, sys_opts.init.min_median_parallax_deg,
+        "median of {:.2f} deg (or {:.1f} px that no turn of the camera explains) with a median parallax of {:.1f} deg "
+        "between two frames (last: {})",
+        frames_processed, out_dir, sys_opts.init.min_median_motion_deg, sys_opts.init.min_nonrotational_motion_px,
+        sys_opts.init.min_median_parallax_deg,
         reports.empty() ? std::string("no frame") : reports.back().note));
   return sum;
 }

@@ -26,7 +26,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseTrackerOptions, hypotheses, 
                                                 min_inlier_ratio, keyframe_min_inlier_ratio, pivot, rounds, round_shrink,
                                                 retry_rot_scale, retry_max_residual_ratio,
                                                 retry_max_residual_fraction, retry_min_typical_fraction)
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_deg, min_common_features, min_inliers,
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_deg, min_nonrotational_motion_px, min_common_features, min_inliers,
                                                 min_points, min_shared_fraction, min_count_floor, min_window_frames,
                                                 min_median_parallax_deg, max_relative_depth_noise, ambiguity_chi2,
                                                 method, ransac_threshold_px, refine_window, refine_huber_px,

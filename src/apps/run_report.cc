@@ -297,6 +297,7 @@ void ImageRun::WriteReport() {
                   {"seed", sys_opts.seed},
                   {"samples_per_point", sys_opts.mapping.samples},
                   {"init_min_median_motion_deg", sys_opts.init.min_median_motion_deg},
+                  {"init_min_nonrotational_motion_px", sys_opts.init.min_nonrotational_motion_px},
                   {"init_min_median_parallax_deg", sys_opts.init.min_median_parallax_deg},
                   {"sigma_rot_deg", sys_opts.tracker.sigma_rot_deg},
                   {"new_point_min_parallax_deg", sys_opts.mapping.min_parallax_deg},

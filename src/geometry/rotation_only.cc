@@ -9,6 +9,8 @@
 #include <Eigen/SVD>
 #include <fmt/format.h>
 
+#include "core/median.h"
+
 namespace mcslam::geometry {
 namespace {
 
@@ -39,6 +41,29 @@ Eigen::Matrix3d RotationFromBearings(std::span<const Eigen::Vector3d> ref, std::
   Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
   d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;  // a rotation, not a reflection
   return svd.matrixV() * d * svd.matrixU().transpose();
+}
+
+double NonRotationalMotionRad(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam) {
+  // Each refit takes the better half under the last rotation: the first, fitted to every pair, may be tilted by
+  // the wrong ones, and its better half hold some of them still.
+  constexpr int kRefits = 3;
+  const size_t n = std::min(ref.size(), cam.size());
+  if (n < 3) return 0.0;
+  const auto residuals = [&](const Eigen::Matrix3d& r) {
+    std::vector<double> a(n);
+    for (size_t k = 0; k < n; ++k) a[k] = AngleBetween(r * ref[k], cam[k]);
+    return a;
+  };
+  std::vector<double> a = residuals(RotationFromBearings(ref.first(n), cam.first(n)));
+  for (int refit = 0; refit < kRefits; ++refit) {
+    const double cut = UpperMedian(a);
+    std::vector<Eigen::Vector3d> ref_in, cam_in;
+    for (size_t k = 0; k < n; ++k)
+      if (a[k] <= cut) ref_in.push_back(ref[k]), cam_in.push_back(cam[k]);
+    if (ref_in.size() < 3) break;
+    a = residuals(RotationFromBearings(ref_in, cam_in));
+  }
+  return UpperMedian(std::move(a));
 }
 
 RotationOnlyResult EstimateRotationOnly(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam,

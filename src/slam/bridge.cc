@@ -100,9 +100,7 @@ std::vector<FrameReport> Bridge::Try(int slot) {
     state_.reset();
     return out;
   }
-  const double med_motion = UpperMedian(c.motion_deg);
-  if (med_motion < io.min_median_motion_deg)
-    return wait(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
+  if (std::optional<std::string> short_of = init_.MotionShort(c)) return wait(*short_of);
   std::vector<int> window;
   for (int s = a; s <= slot; ++s) window.push_back(s);
   if (static_cast<int>(window.size()) < io.min_window_frames) return wait("too few frames since it");

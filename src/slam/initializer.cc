@@ -48,6 +48,27 @@ Initializer::Correspondences Initializer::Correspond(int ref_slot, int cur_slot)
   return c;
 }
 
+double Initializer::NonRotationalMotionPx(const Correspondences& c) const {
+  std::vector<Eigen::Vector3d> ref, cur;
+  for (size_t i = 0; i < c.n1.size(); ++i) {
+    ref.push_back(c.n1[i].homogeneous().normalized());
+    cur.push_back(c.n2[i].homogeneous().normalized());
+  }
+  return geometry::NonRotationalMotionRad(ref, cur) * s_.focal_px;
+}
+
+std::optional<std::string> Initializer::MotionShort(const Correspondences& c) const {
+  const InitOptions& io = s_.options.init;
+  const double med_motion = UpperMedian(c.motion_deg);
+  if (med_motion >= io.min_median_motion_deg) return std::nullopt;
+  if (!(io.min_nonrotational_motion_px > 0))
+    return fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg);
+  const double nonrot_px = NonRotationalMotionPx(c);
+  if (nonrot_px >= io.min_nonrotational_motion_px) return std::nullopt;
+  return fmt::format("median feature motion {:.2f} deg < {:.2f} deg, {:.2f} px of it no turn explains < {:.2f} px",
+                     med_motion, io.min_median_motion_deg, nonrot_px, io.min_nonrotational_motion_px);
+}
+
 Initializer::InitCounts Initializer::NeededCounts(int cur_slot) const {
   const InitOptions& io = s_.options.init;
   const int offered = static_cast<int>(std::ceil(io.min_shared_fraction *
@@ -462,9 +483,7 @@ bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
   // builds on, waits for a sharp one (the rendered fast scenario with two of every ten frames blurred, seed 1,
   // initialised on its blurred frame 3 and lost the 23-point map in the next).
   if (cur.blurred) return note("a blurred frame: the initialisation waits for a sharp one");
-  const double med_motion = UpperMedian(c.motion_deg);
-  if (med_motion < io.min_median_motion_deg)
-    return note(fmt::format("median feature motion {:.2f} deg < {:.2f} deg", med_motion, io.min_median_motion_deg));
+  if (std::optional<std::string> short_of = MotionShort(c)) return note(std::move(*short_of));
 
   // The window: every frame from the reference to this one.
   std::vector<int> window;

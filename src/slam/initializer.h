@@ -76,6 +76,14 @@ class Initializer {
     std::vector<double> motion_deg;
   };
   Correspondences Correspond(int ref_slot, int cur_slot) const;
+  // Whether the features moved enough since the reference for the two views to be tried: a median motion of at
+  // least InitOptions::min_median_motion_deg, or a median motion that no rotation explains of at least
+  // min_nonrotational_motion_px (a camera that circles what it looks at). nullopt when they did, else why not (the
+  // frame's note).
+  std::optional<std::string> MotionShort(const Correspondences& c) const;
+  // The part of the features' motion that no turn of the camera explains (geometry::NonRotationalMotionRad), in
+  // pixels at the focal length.
+  double NonRotationalMotionPx(const Correspondences& c) const;
   // InitOptions' shared features, inliers and points, each lowered where the frame tracks few features
   // (min_shared_fraction of them, down to min_count_floor).
   struct InitCounts {

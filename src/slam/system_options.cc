@@ -1,6 +1,8 @@
 // The System's options: their names on the command line and their checks (system_options.h).
 #include "slam/system_options.h"
 
+#include <cmath>
+
 #include <stdexcept>
 #include <string>
 
@@ -29,6 +31,8 @@ StructureMethod ParseStructureMethod(const std::string& name) {
 void InitOptions::Check() const {
   if (!(min_median_motion_deg > 0 && min_median_motion_deg < 90))
     Fail(fmt::format("init: min_median_motion_deg must be in (0, 90), got {}", min_median_motion_deg));
+  if (!(min_nonrotational_motion_px >= 0 && std::isfinite(min_nonrotational_motion_px)))
+    Fail(fmt::format("init: min_nonrotational_motion_px must be >= 0, got {}", min_nonrotational_motion_px));
   if (!(max_relative_depth_noise > 0)) Fail(fmt::format("init: max_relative_depth_noise must be > 0, got {}", max_relative_depth_noise));
   if (!(ambiguity_chi2 >= 0)) Fail(fmt::format("init: ambiguity_chi2 must be >= 0, got {}", ambiguity_chi2));
   if (min_common_features < 8) Fail(fmt::format("init: min_common_features must be >= 8, got {}", min_common_features));

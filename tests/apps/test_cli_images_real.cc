@@ -1,13 +1,19 @@
-// `mcslam run` on the real sequences of ../shared/data (KITTI 06, 7-Scenes RedKitchen; skipped where the data
-// folder is not there): frames tracked, accuracy, relocalisation after unreadable frames, the same frames as a video.
+// `mcslam run` on the real sequences of ../shared/data (KITTI 06, 7-Scenes RedKitchen, the Middlebury temple ring;
+// skipped where the data folder is not there): frames tracked, accuracy, relocalisation after unreadable frames, the
+// same frames as a video, a camera circling what it looks at.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -195,6 +201,84 @@ TEST(CliImagesReal, SevenScenesMapDoesNotRunDry) {
   const RealRun dry = RunOnRealSequence(seq, dir2, flags + " --starving-inliers 0 --no-provisional-map");
   if (dry.report.is_null()) return;
   EXPECT_LT(dry.report["tracked"].get<int>(), 200) << dry.output;
+}
+
+// ---- the Middlebury temple ring: a camera circling an object it keeps in view ---------------------------------
+
+// Views `names` of the ring (templeR_par.txt: `name k11..k33 r11..r33 t1 t2 t3`, world to camera) as an image
+// folder in that order, and their camera centres and orientations as a TUM ground truth at 30 Hz (the stamps
+// `mcslam run` gives a folder without stamps).
+void MakeTempleRun(const std::string& seq, const std::vector<std::string>& names, const fs::path& out) {
+  std::ifstream par(fs::path(seq) / "templeR_par.txt");
+  ASSERT_TRUE(par.good()) << seq;
+  std::map<std::string, std::vector<double>> cams;
+  std::string line;
+  std::getline(par, line);  // the count
+  while (std::getline(par, line)) {
+    std::istringstream in(line);
+    std::string name;
+    std::vector<double> v(21);
+    if (!(in >> name)) continue;
+    for (double& x : v) in >> x;
+    if (in) cams[name] = v;
+  }
+  fs::create_directories(out / "images");
+  std::string gt;
+  for (size_t i = 0; i < names.size(); ++i) {
+    ASSERT_TRUE(cams.count(names[i])) << names[i] << " not in templeR_par.txt";
+    const std::vector<double>& v = cams[names[i]];
+    Eigen::Matrix3d cam_from_world;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) cam_from_world(r, c) = v[9 + 3 * r + c];
+    const Eigen::Vector3d t(v[18], v[19], v[20]);
+    const Eigen::Vector3d centre = -cam_from_world.transpose() * t;
+    const Eigen::Quaterniond q(cam_from_world.transpose());
+    gt += fmt::format("{:.6f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f}\n", i / 30.0, centre.x(), centre.y(),
+                      centre.z(), q.x(), q.y(), q.z(), q.w());
+    fs::copy_file(fs::path(seq) / "images" / names[i], out / "images" / fmt::format("{:06d}.png", i));
+  }
+  testing::WriteText((out / "gt.txt").string(), gt);
+}
+
+// The frame the map was made at ("initialised from frames A and B": B), -1 when none was.
+int InitialisedAt(const std::string& output) {
+  std::smatch m;
+  if (!std::regex_search(output, m, std::regex("initialised from frames [0-9]+ and ([0-9]+)"))) return -1;
+  return std::stoi(m[1].str());
+}
+
+// Two clean runs of the ring, 8 degrees of orbit a view about a 16 cm plaster temple 57 cm away, the camera
+// fixating it through a narrow lens (24 degrees across, exact calibration): 0006-0012 (7 views, 45 cm of path) and
+// 0030 back to 0013 (18 views, 1.28 m). The features barely move in the image while the parallax grows by 8
+// degrees a view, so the median feature motion that starts the initialisation (2.3 degrees) came late or never:
+// before the motion that no turn explains started it too, 0006-0012 never initialised (0 of 7 posed) and 0030-0013
+// did at its 15th view (16 of 18 posed, ATE 1.6-1.8 cm and 2.3-2.5 degrees over seeds 1-3). Default settings, the
+// camera only. Measured over seeds 1-10: initialised at the 3rd view on every one, 7/7 at ATE 2.3-2.8 mm and 18/18
+// at 3.2-3.4 mm, none mirrored. Bounds: every view posed, the map from the first 4 views, ATE under 4 mm and 5 mm
+// (1.4x the worst seed: a first map made from a worse pair of views, or one frame misplaced, exceeds them).
+TEST(CliImagesReal, TempleRingOrbitsInitialiseInTheirFirstViews) {
+  REAL_SEQUENCE_OR_SKIP(seq, "middlebury_templeRing");
+  struct Run {
+    int first, last;
+    double max_ate_m;
+  };
+  for (const Run& r : {Run{6, 12, 0.004}, Run{30, 13, 0.005}}) {
+    TempDir dir;
+    std::vector<std::string> names;
+    for (int i = r.first; i != r.last + (r.last > r.first ? 1 : -1); i += r.last > r.first ? 1 : -1)
+      names.push_back(fmt::format("templeR{:04d}.png", i));
+    MakeTempleRun(seq, names, dir.path() / "ring");
+    const RealRun run = RunOnRealSequence(dir / "ring/images", dir,
+                                          fmt::format("--camera \"1520.4 1525.9 302.32 246.87\" --gt {}", dir / "ring/gt.txt"));
+    if (run.report.is_null()) return;
+    const std::string what = fmt::format("views {:04d}-{:04d}", r.first, r.last);
+    EXPECT_EQ(run.report["tracked"].get<int>(), static_cast<int>(names.size())) << what << "\n" << run.output;
+    const int at = InitialisedAt(run.output);
+    EXPECT_GE(at, 0) << what;
+    EXPECT_LE(at, 3) << what << "\n" << run.output;
+    EXPECT_FALSE(run.report["ground_truth"]["mirrored"].get<bool>()) << what;
+    EXPECT_LT(run.report["ground_truth"]["ate_m"]["rmse"].get<double>(), r.max_ate_m) << what << "\n" << run.output;
+  }
 }
 
 }  // namespace
