@@ -179,6 +179,9 @@ ImageJobOptions ImageOptionsFor(const RunArgs& a, const nlohmann::json* report) 
   if (image.relocalise == defaults.relocalise && reloc.is_object() && reloc.contains("enabled") &&
       reloc["enabled"].is_boolean())
     image.relocalise = reloc["enabled"].get<bool>();
+  if (image.relocalise_turned == defaults.relocalise_turned && reloc.is_object() && reloc.contains("turned") &&
+      reloc["turned"].is_boolean())
+    image.relocalise_turned = reloc["turned"].get<bool>();
   if (image.pipelined == defaults.pipelined) {
     const nlohmann::json im = (*report)["options"].value("image", nlohmann::json::object());
     if (im.is_object() && im.contains("pipelined") && im["pipelined"].is_boolean())

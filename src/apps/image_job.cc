@@ -119,6 +119,10 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_flag("--no-relocalise{false}", o->relocalise,
                 "Once lost, only the last pose is searched around (default: the features are also matched to the map "
                 "by their descriptors, and a pose from those restarts the tracking)");
+  cmd->add_flag("--no-turned-relocalisation{false}", o->relocalise_turned,
+                "Relocalise by upright descriptors only (default: when they place a lost frame nowhere, they are turned "
+                "about the camera's axis in 30 degree steps, for a camera that turned about it since the map saw the "
+                "place)");
   cmd->add_flag("--pipelined", o->pipelined,
                 "Run each frame's front end on a thread of its own beside the back end of the frame before (the front "
                 "end then looks for lost points where the frame before the last placed them; slower on two cores: "
@@ -254,6 +258,7 @@ void ImageRun::Setup(const slam::SystemOptions& system_in) {
   vs_opts.frontend.describe_async = true;  // SIFT of the new tracks runs while the back end estimates the pose
   vs_opts.system = sys_opts;
   vs_opts.relocalise = options.relocalise;
+  vs_opts.relocalise_turned = options.relocalise_turned;
   vs_opts.pipelined = options.pipelined;
   fe_opts = vs_opts.frontend;
   vslam = std::make_unique<pipeline::VisualSlam>(camera, vs_opts, std::move(pose_kernel), std::move(point_kernel));
@@ -347,12 +352,16 @@ void ImageRun::RunFrames() {
     row.reloc_tried = step.reloc_tried;
     row.reloc_matches = step.reloc_matches;
     row.reloc_inliers = step.reloc_inliers;
+    row.reloc_turned = step.reloc_turned;
     row.reloc_ms = step.reloc_ms;
     row.backend_ms = step.backend_ms;
     if (step.reloc_inliers > 0) {
       progress.Clear();
-      spdlog::info("frame {}: relocalised from {} of {} features matched to the map{}", row.index, row.reloc_inliers,
-                   row.reloc_matches, step.reloc_near_provisional ? " (near the provisional map's orientation)" : "");
+      spdlog::info("frame {}: relocalised from {} of {} features matched to the map{}{}", row.index, row.reloc_inliers,
+                   row.reloc_matches, step.reloc_near_provisional ? " (near the provisional map's orientation)" : "",
+                   step.reloc_turned ? fmt::format(" (their descriptors turned by {:.0f} deg about the camera's axis)",
+                                                   step.reloc_turn_deg)
+                                     : std::string());
     }
     ++frames_processed;
     const slam::FrameReport* current = nullptr;

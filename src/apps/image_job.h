@@ -32,6 +32,9 @@ struct ImageJobOptions {
   // After a lost frame, each frame's features are matched by their SIFT descriptors to the map points whose
   // tracks ended, and a pose that enough of them agree with (RANSAC PnP) restarts the tracking there.
   bool relocalise = true;
+  // ... and also by descriptors turned about the camera's axis when upright ones place nothing
+  // (pipeline::VisualSlamOptions::relocalise_turned; --no-turned-relocalisation).
+  bool relocalise_turned = true;
   // --pipelined: the front end of each frame runs beside the back end of the frame before
   // (pipeline::VisualSlamOptions::pipelined).
   bool pipelined = false;

@@ -312,7 +312,8 @@ void ImageRun::WriteReport() {
   j["options"]["image"] = {{"dataset", options.dataset},       {"camera", options.camera_path},
                            {"gt", options.gt_path},            {"format", options.format},
                            {"fps", options.fps},               {"gt_scale", options.gt_scale},
-                           {"relocalise", options.relocalise}, {"pipelined", options.pipelined},
+                           {"relocalise", options.relocalise}, {"relocalise_turned", options.relocalise_turned},
+                           {"pipelined", options.pipelined},
                            {"overlay", options.overlay_path},
                            {"plot", options.plot_path},        {"viewer", options.viewer}};
   if (!options.load_map_path.empty() || !options.save_map_path.empty()) {
@@ -348,20 +349,23 @@ void ImageRun::WriteReport() {
   {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
     // pose step succeeded from it.
-    int64_t tried = 0, pose_found = 0, reloc_tracked = 0;
+    int64_t tried = 0, pose_found = 0, reloc_tracked = 0, turned = 0;
     for (const FrameRow& row : rows) {
       if (!row.reloc_tried) continue;
       ++tried;
       reloc.Add(row.reloc_ms);
       if (row.reloc_inliers == 0) continue;
       ++pose_found;
+      turned += row.reloc_turned;
       if (auto it = report_of_index.find(row.index);
           it != report_of_index.end() && reports[it->second].status == slam::FrameStatus::kTracked)
         ++reloc_tracked;
     }
     j["relocalisation"] = {{"enabled", options.relocalise},
+                           {"turned", options.relocalise_turned},
                            {"tried", tried},
                            {"pose_found", pose_found},
+                           {"pose_found_turned", turned},
                            {"tracked", reloc_tracked},
                            {"ms", StageJson(reloc)}};
   }

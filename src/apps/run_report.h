@@ -30,6 +30,7 @@ struct FrameRow {
   // (0: no pose found).
   bool reloc_tried = false;
   int reloc_matches = 0, reloc_inliers = 0;
+  bool reloc_turned = false;  // ... from descriptors turned about the camera's axis (VisualSlamOptions::relocalise_turned)
   double reloc_ms = 0;
   double decode_ms = 0, frame_ms = 0;
   double backend_ms = 0;     // System::Process, wall time

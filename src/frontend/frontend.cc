@@ -195,6 +195,29 @@ std::optional<Descriptor> Frontend::DescriptorIfDone(int64_t feature_id) const {
   return std::nullopt;
 }
 
+std::vector<std::optional<Descriptor>> Frontend::DescribeTurned(std::span<const int64_t> ids,
+                                                                std::span<const float> angles_deg) {
+  Impl& m = *impl_;
+  if (m.prev_pyramid.empty()) return {};
+  std::vector<cv::Point2f> points;
+  std::vector<size_t> live;  // index into ids of each point
+  for (size_t i = 0; i < ids.size(); ++i)
+    for (const Track& t : m.tracks)
+      if (t.id == ids[i]) {
+        points.push_back(t.uv);
+        live.push_back(i);
+        break;
+      }
+  std::vector<Descriptor> d;
+  std::vector<char> ok;
+  m.describer.DescribeTurned(m.prev_pyramid[0], points, angles_deg, &d, &ok);
+  std::vector<std::optional<Descriptor>> out(angles_deg.size() * ids.size());
+  for (size_t a = 0; a < angles_deg.size(); ++a)
+    for (size_t k = 0; k < live.size(); ++k)
+      if (ok[a * points.size() + k]) out[a * ids.size() + live[k]] = d[a * points.size() + k];
+  return out;
+}
+
 bool Frontend::Relabel(int64_t from, int64_t to, const std::optional<Descriptor>& descriptor) {
   Impl& m = *impl_;
   m.JoinDescription();

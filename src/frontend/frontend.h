@@ -258,6 +258,11 @@ class Frontend {
   // its own buffers, never the tracks, so reading them meanwhile is safe).
   std::optional<Descriptor> DescriptorIfDone(int64_t feature_id) const;
 
+  // Live tracks `ids` described again in the last frame with their descriptors' grids turned by each of
+  // `angles_deg` (SiftDescriber::DescribeTurned): angles_deg.size() x ids.size() entries, angle by angle; nullopt for
+  // an id not live, or a point that could not be described. Empty before the first frame.
+  std::vector<std::optional<Descriptor>> DescribeTurned(std::span<const int64_t> ids, std::span<const float> angles_deg);
+
   // The live track `from` goes on as `to` (relocalisation matched it to that map point's feature): from
   // now on it is reported under `to` and keeps the descriptor `to` was described with. false (and no
   // change) when `from` is not live, or `to` is live or was never issued by this front end.

@@ -18,12 +18,51 @@ SiftDescriber::SiftDescriber(double size_px) : size_px_(static_cast<float>(size_
   // OpenCV's SIFT reads, for an upright keypoint, pixels less than (4 + 1) / 2 cells of 3 * size / 2 px
   // from it, from its first Gaussian level, whose blur (sigma ~1.5) reaches 6 px further.
   radius_px_ = static_cast<int>(std::ceil(2.5 * 1.5 * size_px)) + 1 + 7;
+  // Turned, the grid's corners reach sqrt(2) times as far.
+  turned_radius_px_ = static_cast<int>(std::ceil(std::sqrt(2.0) * 2.5 * 1.5 * size_px)) + 1 + 7;
 }
 
-cv::Rect SiftDescriber::Patch(const cv::Point2f& uv, const cv::Size& image) const {
+cv::Rect SiftDescriber::Patch(const cv::Point2f& uv, const cv::Size& image, bool turned) const {
   const int x = static_cast<int>(std::floor(uv.x)), y = static_cast<int>(std::floor(uv.y));
-  return cv::Rect(x - radius_px_, y - radius_px_, 2 * radius_px_ + 2, 2 * radius_px_ + 2) &
-         cv::Rect(0, 0, image.width, image.height);
+  const int r = turned ? turned_radius_px_ : radius_px_;
+  return cv::Rect(x - r, y - r, 2 * r + 2, 2 * r + 2) & cv::Rect(0, 0, image.width, image.height);
+}
+
+void SiftDescriber::DescribeTurned(const cv::Mat& gray, std::span<const cv::Point2f> points,
+                                   std::span<const float> angles_deg, std::vector<Descriptor>* out,
+                                   std::vector<char>* ok) const {
+  const size_t n = points.size();
+  out->assign(n * angles_deg.size(), Descriptor{});
+  ok->assign(n * angles_deg.size(), 0);
+  cv::Rect box;
+  std::vector<size_t> inside;
+  for (size_t i = 0; i < n; ++i) {
+    const cv::Rect patch = Patch(points[i], gray.size(), true);
+    if (patch.empty()) continue;
+    box = inside.empty() ? patch : (box | patch);
+    inside.push_back(i);
+  }
+  if (inside.empty() || angles_deg.empty()) return;
+  std::vector<cv::KeyPoint> kp;
+  kp.reserve(inside.size() * angles_deg.size());
+  for (const float angle : angles_deg)
+    for (size_t i : inside)
+      kp.emplace_back(points[i].x - static_cast<float>(box.x), points[i].y - static_cast<float>(box.y), size_px_,
+                      angle, 0.0f, 0 /* octave 0, layer 0 */);
+  cv::Mat desc;
+  try {
+    sift_->compute(gray(box), kp, desc);
+  } catch (const cv::Exception&) {
+    return;  // none described: the caller matches nothing
+  }
+  if (desc.rows != static_cast<int>(kp.size()) || desc.cols != kDescriptorLength || desc.type() != CV_32F) return;
+  for (size_t a = 0; a < angles_deg.size(); ++a)
+    for (size_t k = 0; k < inside.size(); ++k) {
+      const int row = static_cast<int>(a * inside.size() + k);
+      const size_t slot = a * n + inside[k];
+      std::copy(desc.ptr<float>(row), desc.ptr<float>(row) + kDescriptorLength, (*out)[slot].begin());
+      (*ok)[slot] = 1;
+    }
 }
 
 bool SiftDescriber::DescribeIn(const cv::Mat& gray, const cv::Rect& roi, std::span<const cv::Point2f> points,

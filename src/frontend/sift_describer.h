@@ -1,5 +1,5 @@
 #pragma once
-// Upright SIFT descriptors (OpenCV's) at given points. OpenCV builds a Gaussian octave over whatever image it is
+// Upright SIFT descriptors (OpenCV's) at given points (and turned ones, for a camera turned about its axis). OpenCV builds a Gaussian octave over whatever image it is
 // given, at about 40 ns a pixel whatever the number of points, so each point is described from a small patch
 // around it (everything its descriptor reads, so the values are those of a whole-image computation), and points
 // whose patches overlap enough are described together from the box that holds their patches, once.
@@ -27,8 +27,16 @@ class SiftDescriber {
   void DescribeAll(const cv::Mat& gray, std::span<const cv::Point2f> points, std::vector<Descriptor>* out,
                    std::vector<char>* ok) const;
 
-  // The patch one point needs (clipped to the image; empty when the point is too far outside it).
-  cv::Rect Patch(const cv::Point2f& uv, const cv::Size& image) const;
+  // Every point's descriptor with its grid turned by each of `angles_deg` (OpenCV's keypoint angle): how the point
+  // looks to a camera turned about its axis by that much since another view described it upright. One OpenCV call
+  // over the box around every point's turned patch (one Gaussian octave for all of them): out and ok hold
+  // angles_deg.size() x points.size() entries, angle by angle. All not ok when that call fails.
+  void DescribeTurned(const cv::Mat& gray, std::span<const cv::Point2f> points, std::span<const float> angles_deg,
+                      std::vector<Descriptor>* out, std::vector<char>* ok) const;
+
+  // The patch one point needs (clipped to the image; empty when the point is too far outside it); a turned grid
+  // reaches up to sqrt(2) times further.
+  cv::Rect Patch(const cv::Point2f& uv, const cv::Size& image, bool turned = false) const;
 
  private:
   // One OpenCV call: points (indices into `points`) described from image(roi); false if it gave a wrong count.
@@ -36,7 +44,7 @@ class SiftDescriber {
                   std::span<const size_t> which, std::vector<Descriptor>* out, std::vector<char>* ok) const;
 
   float size_px_;
-  int radius_px_ = 0;
+  int radius_px_ = 0, turned_radius_px_ = 0;
   cv::Ptr<cv::SIFT> sift_;
 };
 

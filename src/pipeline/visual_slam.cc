@@ -57,6 +57,12 @@ void VisualSlamOptions::Check() const {
   if (!(relocalisation_max_distance > 0))
     throw std::invalid_argument(
         fmt::format("relocalisation_max_distance must be > 0, got {}", relocalisation_max_distance));
+  if (turned_relocalisation_sample < 1)
+    throw std::invalid_argument(
+        fmt::format("turned_relocalisation_sample must be >= 1, got {}", turned_relocalisation_sample));
+  if (!(turned_relocalisation_step_deg >= 1 && turned_relocalisation_step_deg <= 180))
+    throw std::invalid_argument(
+        fmt::format("turned_relocalisation_step_deg must be in [1, 180], got {}", turned_relocalisation_step_deg));
 }
 
 const slam::FrameReport* VisualSlamStep::current() const {
@@ -270,7 +276,7 @@ FrameObservations VisualSlam::BeforeBackend(bool after_gap, VisualSlamStep* step
   // the map it must join.
   if (options_.relocalise && (was_lost_ || after_gap || system_.bridging()) && system_.initialised()) {
     const auto t_reloc = Clock::now();
-    Relocalise(step->frontend, &obs, step);
+    Relocalise(step->frontend, &obs, step, was_lost_ || after_gap);
     step->reloc_ms = MsSince(t_reloc);
   }
   return obs;
@@ -376,7 +382,8 @@ std::optional<VisualSlamStep> VisualSlam::Flush() {
 // to the map points whose tracks ended (nearest, Lowe's ratio and a distance cap; one feature for a map point,
 // the closest), together with the map points still tracked, then the System's RANSAC PnP. The matched tracks
 // that agree with the pose go on under their map points' ids, in this frame's observations too.
-void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step) {
+void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step,
+                            bool turned) {
   step->reloc_tried = true;
   // Map points that left the map need no descriptor any more.
   std::erase_if(lost_descriptors_, [&](const auto& kv) { return Removed(system_.map().Find(kv.first)); });
@@ -461,6 +468,54 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
   };
   std::optional<slam::Relocalisation> reloc = match(false);
   if (!reloc && first_looks.size() >= 2) reloc = match(true);
+  if (!reloc && turned && options_.relocalise_turned && candidates.size() >= 2) {
+    // The turn about the camera's axis under which the most of a sample of the new tracks match the last looks
+    // (upright excluded: it was just tried), then every new track matched again under it.
+    std::vector<float> angles;
+    for (double a = options_.turned_relocalisation_step_deg; a < 360.0 - 1e-9; a += options_.turned_relocalisation_step_deg)
+      angles.push_back(static_cast<float>(a));
+    const size_t sample = std::min(candidates.size(), static_cast<size_t>(options_.turned_relocalisation_sample));
+    std::vector<int64_t> ids;
+    for (size_t i = 0; i < sample; ++i) ids.push_back(candidates[i].feature->feature_id);
+    const std::vector<std::optional<frontend::Descriptor>> d = frontend_.DescribeTurned(ids, angles);
+    const auto matched = [&](const std::vector<std::optional<frontend::Descriptor>>& turned_d, size_t a) {
+      int count = 0;
+      for (size_t i = 0; i < sample; ++i)
+        if (const std::optional<frontend::Descriptor>& di = turned_d[a * sample + i])
+          count += frontend::MatchDescriptor(*di, looks, match_options).has_value();
+      return count;
+    };
+    int best_count = 0;
+    float best = 0.f;
+    for (size_t a = 0; a < angles.size() && !d.empty(); ++a)
+      if (const int count = matched(d, a); count > best_count) best_count = count, best = angles[a];
+    // Half a step either side of the best: a turn between two steps is then at most a quarter step off (SIFT's
+    // descriptors are half as far from an unrelated point's 15 degrees off, SiftDescriber's tests).
+    if (best_count > 0) {
+      const float half = static_cast<float>(options_.turned_relocalisation_step_deg / 2.0);
+      const float sides[2] = {best - half, best + half};
+      const std::vector<std::optional<frontend::Descriptor>> ds = frontend_.DescribeTurned(ids, sides);
+      for (size_t a = 0; a < 2 && !ds.empty(); ++a)
+        if (const int count = matched(ds, a); count > best_count) best_count = count, best = sides[a];
+    }
+    step->reloc_turn_deg = best_count > 0 ? best : 0.0;
+    // Fewer matches than PnP could ever take in the whole frame's share of the sample: nothing to look at again.
+    const double share = static_cast<double>(sample) / static_cast<double>(candidates.size());
+    if (best_count > 0 && best_count >= share * options_.system.relocalise_min_inliers) {
+      std::vector<int64_t> all;
+      for (const Candidate& c : candidates) all.push_back(c.feature->feature_id);
+      const std::vector<std::optional<frontend::Descriptor>> turned_d =
+          frontend_.DescribeTurned(all, std::span<const float>(&best, 1));
+      std::vector<Candidate> upright = std::move(candidates);
+      candidates.clear();
+      for (size_t i = 0; i < upright.size() && !turned_d.empty(); ++i)
+        if (turned_d[i])
+          candidates.push_back({upright[i].feature, *turned_d[i], frontend::MatchDescriptor(*turned_d[i], looks, match_options)});
+      reloc = match(false);
+      if (!reloc && first_looks.size() >= 2) reloc = match(true);
+      if (reloc) step->reloc_turned = true;
+    }
+  }
   if (!reloc) return;
   step->reloc_inliers = static_cast<int>(reloc->inlier_point_ids.size());
   step->reloc_near_provisional = reloc->near_provisional_orientation;

@@ -66,6 +66,16 @@ struct VisualSlamOptions {
   // points, whose median distance is ~520 on the shared sequences) keeps the matches a changed view pushed
   // past 250.
   double relocalisation_max_distance = 400.0;
+  // When the lost frame's upright descriptors place it nowhere, the camera may have turned about its axis since
+  // the map saw the place (a phone held the other way up, a drone that banked, a camera put back rolled): SIFT's
+  // upright descriptors match up to a few tens of degrees of such a turn only. The frame's new tracks (up to
+  // turned_relocalisation_sample of them) are described again with their grids turned by every
+  // turned_relocalisation_step_deg, the turn under which most of them match is taken, and all of them are matched
+  // again under it before the RANSAC PnP. The Middlebury temple ring seen again upside down (views 0042-0034 after
+  // 0013-0030) relocalised nowhere before. false: upright only.
+  bool relocalise_turned = true;
+  int turned_relocalisation_sample = 64;
+  double turned_relocalisation_step_deg = 30.0;
   // The pipelined frame loop (VisualSlam::Push): the front end of each frame runs on a thread of its own while
   // the back end works on the frame before it. What the front end takes from the back end (the lost points to look
   // for, projected with the latest pose) is then one frame older: the back end of the frame before has not ended.
@@ -94,6 +104,10 @@ struct VisualSlamStep {
   int reloc_matches = 0;
   int reloc_inliers = 0;
   bool reloc_near_provisional = false;  // Relocalisation::near_provisional_orientation
+  // The turn about the camera's axis under which the new tracks matched best (VisualSlamOptions::relocalise_turned;
+  // 0: not looked for), and whether the pose came from descriptors so turned.
+  double reloc_turn_deg = 0;
+  bool reloc_turned = false;
   double reloc_ms = 0;
   // The report of this frame among `reports` (nullptr when the System gave none for it).
   const slam::FrameReport* current() const;
@@ -144,7 +158,9 @@ class VisualSlam {
   std::vector<frontend::RemapRequest> RemapRequests();
   // After the front end: the requests not re-attached count as failed tries.
   void CountRemapTries(std::span<const frontend::RemapRequest> requests, const frontend::FrameResult& fr);
-  void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step);
+  // turned: also look for the map through descriptors turned about the camera's axis when upright ones place
+  // nothing (after a lost frame or a gap, not while a provisional map holds the map's orientation).
+  void Relocalise(const frontend::FrameResult& fr, FrameObservations* obs, VisualSlamStep* step, bool turned);
   // The stages of one frame, in the order Process runs them; Push runs the front end of the next frame between
   // BeforeBackend and the System's Process, and AfterBackend renames the tracks the System merged in that frame's
   // result too (`next`).
