@@ -151,7 +151,7 @@ camera given (`--camera "%s"`), and evaluated after Sim(3) alignment.
 
 Such a camera is what an object scan, a turntable or a walk around a statue gives: the features barely move in
 the image (the camera turns to keep them in view) while the parallax between the views grows by 8 degrees a
-view. The initialisation starts on a median feature motion of 2.3 degrees, or on a median motion of 3 px that no
+view. The initialisation starts on a median feature motion of 2.3 degrees, or on a median motion of 5 px that no
 turn of the camera explains (`InitOptions::min_nonrotational_motion_px`, [tuning.md](tuning.md)). A lost
 frame whose upright SIFT descriptors place it nowhere is looked for again through descriptors turned about the
 camera's axis (`VisualSlamOptions::relocalise_turned`).
