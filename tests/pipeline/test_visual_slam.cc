@@ -167,6 +167,10 @@ constexpr int kMaxLost = 3;
 TEST(VisualSlam, AStarvingMapTakesNewPointsFromTwoViewsSoFastMotionDoesNotLoseIt) {
   auto lost_after_init = [](const Scene& scene, int min_views) {
     VisualSlamOptions options;
+    // Upright relocalisation only: what is measured is how long the map stays lost, not how it is found again.
+    // Through descriptors turned about the camera's axis too, seed 2's three-view run is found again sooner
+    // (7 frames lost instead of 14; its two-view run loses none either way).
+    options.relocalise_turned = false;
     options.system.mapping.starving_min_track_frames = min_views;
     const Reports reports = RunWhole(scene, options);
     int lost = 0;
