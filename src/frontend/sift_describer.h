@@ -1,8 +1,9 @@
 #pragma once
-// Upright SIFT descriptors (OpenCV's) at given points (and turned ones, for a camera turned about its axis). OpenCV builds a Gaussian octave over whatever image it is
-// given, at about 40 ns a pixel whatever the number of points, so each point is described from a small patch
-// around it (everything its descriptor reads, so the values are those of a whole-image computation), and points
-// whose patches overlap enough are described together from the box that holds their patches, once.
+// Upright SIFT descriptors (OpenCV's) at given points (and turned ones, for a camera turned about its axis).
+// OpenCV builds a Gaussian octave over whatever image it is given, at about 40 ns a pixel whatever the number of
+// points, so each point is described from a small patch around it (everything its descriptor reads, so the values
+// are those of a whole-image computation), and points whose patches overlap enough are described together from the
+// box that holds their patches, once.
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
 

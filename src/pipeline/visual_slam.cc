@@ -431,6 +431,9 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     std::optional<frontend::DescriptorMatch> last;
   };
   std::vector<Candidate> candidates;
+  const auto candidate = [&](const frontend::TrackedFeature& f, const frontend::Descriptor& d) {
+    return Candidate{&f, d, frontend::MatchDescriptor(d, looks, match_options)};
+  };
   std::vector<slam::RelocalisationMatch> tracked;  // tracks that are map points: matched by their ids
   for (const frontend::TrackedFeature& f : fr.features) {
     if (!Removed(system_.map().Find(f.feature_id))) {
@@ -439,7 +442,7 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     }
     if (map_side.size() < 2) continue;
     if (const std::optional<frontend::Descriptor> d = frontend_.GetDescriptor(f.feature_id))
-      candidates.push_back({&f, *d, frontend::MatchDescriptor(*d, looks, match_options)});
+      candidates.push_back(candidate(f, *d));
   }
   std::vector<slam::RelocalisationMatch> matches;
   std::vector<std::pair<int64_t, int64_t>> relabel;  // track id, map point id
@@ -466,8 +469,13 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     step->reloc_matches = static_cast<int>(matches.size());
     return system_.Relocalise(matches);
   };
-  std::optional<slam::Relocalisation> reloc = match(false);
-  if (!reloc && first_looks.size() >= 2) reloc = match(true);
+  // The last looks first, then the first looks as well.
+  const auto match_looks = [&] {
+    std::optional<slam::Relocalisation> r = match(false);
+    if (!r && first_looks.size() >= 2) r = match(true);
+    return r;
+  };
+  std::optional<slam::Relocalisation> reloc = match_looks();
   if (!reloc && turned && options_.relocalise_turned && candidates.size() >= 2) {
     // The turn about the camera's axis under which the most of a sample of the new tracks match the last looks
     // (upright excluded: it was just tried), then every new track matched again under it.
@@ -498,7 +506,7 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
       for (size_t a = 0; a < 2 && !ds.empty(); ++a)
         if (const int count = matched(ds, a); count > best_count) best_count = count, best = sides[a];
     }
-    step->reloc_turn_deg = best_count > 0 ? best : 0.0;
+    step->reloc_turn_deg = best;  // 0 when no turn matched any
     // Fewer matches than PnP could ever take in the whole frame's share of the sample: nothing to look at again.
     const double share = static_cast<double>(sample) / static_cast<double>(candidates.size());
     if (best_count > 0 && best_count >= share * options_.system.relocalise_min_inliers) {
@@ -509,11 +517,9 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
       std::vector<Candidate> upright = std::move(candidates);
       candidates.clear();
       for (size_t i = 0; i < upright.size() && !turned_d.empty(); ++i)
-        if (turned_d[i])
-          candidates.push_back({upright[i].feature, *turned_d[i], frontend::MatchDescriptor(*turned_d[i], looks, match_options)});
-      reloc = match(false);
-      if (!reloc && first_looks.size() >= 2) reloc = match(true);
-      if (reloc) step->reloc_turned = true;
+        if (turned_d[i]) candidates.push_back(candidate(*upright[i].feature, *turned_d[i]));
+      reloc = match_looks();
+      step->reloc_turned = reloc.has_value();
     }
   }
   if (!reloc) return;
