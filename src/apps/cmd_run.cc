@@ -429,8 +429,7 @@ void RegisterRun(CLI::App& app) {
                   "Structure step: mc (Monte Carlo point adjustment, the paper) or ba (local bundle adjustment, baseline)")
       ->check(CLI::IsMember({"mc", "ba"}))
       ->capture_default_str();
-  cmd->add_option("--ba-iterations", args->system.ba_iterations,
-                  "Iteration cap of the bundle adjustment baseline (--structure ba; 5x: a provisional map's join)")
+  cmd->add_option("--ba-iterations", args->system.ba_iterations, "Iteration cap of the local bundle adjustment")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   cmd->add_option("--init-parallax-deg", args->system.init.min_median_parallax_deg,
@@ -487,9 +486,10 @@ void RegisterRun(CLI::App& app) {
                   "(0: the newest keyframes, consecutive)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  cmd->add_option("--local-ba-iterations", args->system.mapping.local_ba_iterations,
-                  "Iteration cap of each keyframe's local bundle adjustment (it starts from the last one's solution)")
-      ->check(CLI::Range(1, 1000))
+  cmd->add_option("--local-ba-tolerance", args->system.mapping.local_ba_function_tolerance,
+                  "The local bundle adjustment ends when an iteration lowers its cost by less than this fraction of it "
+                  "(or after --ba-iterations)")
+      ->check(CLI::Range(0.0, 0.999))
       ->capture_default_str();
   cmd->add_option("--local-ba-async", args->system.mapping.local_ba_async,
                   "Solve each keyframe's local bundle adjustment on its own thread while the next frame is read and "

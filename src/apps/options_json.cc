@@ -40,7 +40,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames
                                                 history_frames, adjust, adjust_threshold_px, candidate_threshold_px,
                                                 samples, window, sigma_scale, sigma_floor_rel_depth, max_distance_px,
                                                 local_ba_keyframes, local_ba_loss_sigmas, local_ba_min_loss_px,
-                                                local_ba_min_step_of_depth, local_ba_iterations, local_ba_async, merge_revisited_points)
+                                                local_ba_min_step_of_depth, local_ba_function_tolerance, local_ba_async, merge_revisited_points)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(PoseSmootherOptions, alpha, predict_frames)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(KnownMapOptions, tracker, smoother)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, structure_method, ba_iterations,

@@ -16,6 +16,9 @@ void BundleAdjustOptions::Check() const {
   if (!(huber_px > 0)) throw std::invalid_argument(fmt::format("bundle adjustment: huber_px must be > 0, got {}", huber_px));
   if (max_iterations < 1)
     throw std::invalid_argument(fmt::format("bundle adjustment: max_iterations must be >= 1, got {}", max_iterations));
+  if (!(function_tolerance >= 0 && function_tolerance < 1))
+    throw std::invalid_argument(
+        fmt::format("bundle adjustment: function_tolerance must be in [0, 1), got {}", function_tolerance));
   if (num_threads < 1) throw std::invalid_argument(fmt::format("bundle adjustment: num_threads must be >= 1, got {}", num_threads));
 }
 
@@ -131,6 +134,7 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
   ceres::Solver::Options so;
   so.linear_solver_type = options.dense_schur ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   so.max_num_iterations = options.max_iterations;
+  so.function_tolerance = options.function_tolerance;
   so.num_threads = options.num_threads;
   so.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;

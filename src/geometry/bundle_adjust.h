@@ -25,6 +25,9 @@ struct BundleAdjustOptions {
   // stop pulling; Huber's stays constant.
   bool cauchy = false;
   int max_iterations = 50;
+  // Converged when an iteration lowers the (robust) cost by less than this fraction of it (Ceres' own test,
+  // its default).
+  double function_tolerance = 1e-6;
   int num_threads = 1;
   // Dense Schur complement: faster where the cameras are few (tens) and most see most points, as in the
   // start of a sequence; sparse (the default) where each camera sees a small part of the map.

@@ -415,7 +415,8 @@ std::unique_ptr<Mapper::LocalBa> Mapper::PrepareLocalBa(int slot) {
   bo.focal_px = s_.focal_px;
   bo.cauchy = true;
   bo.huber_px = std::max(mo.local_ba_min_loss_px, mo.local_ba_loss_sigmas * RecentNoisePx().value_or(1.0));
-  bo.max_iterations = mo.local_ba_iterations;
+  bo.max_iterations = s_.options.ba_iterations;
+  bo.function_tolerance = mo.local_ba_function_tolerance;
   // A few tens of cameras: the dense Schur complement solves the same steps as the sparse one, 5-12 % faster
   // on the shared sequences (the same trajectories to the printed digit; docs/timing.md).
   bo.dense_schur = true;

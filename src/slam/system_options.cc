@@ -65,7 +65,8 @@ void MappingOptions::Check() const {
     Fail(fmt::format("mapping: local_ba_min_loss_px must be in (0, 100], got {}", local_ba_min_loss_px));
   if (!(local_ba_min_step_of_depth >= 0 && local_ba_min_step_of_depth <= 1))
     Fail(fmt::format("mapping: local_ba_min_step_of_depth must be in [0, 1], got {}", local_ba_min_step_of_depth));
-  if (local_ba_iterations < 1) Fail(fmt::format("mapping: local_ba_iterations must be >= 1, got {}", local_ba_iterations));
+  if (!(local_ba_function_tolerance >= 0 && local_ba_function_tolerance < 1))
+    Fail(fmt::format("mapping: local_ba_function_tolerance must be in [0, 1), got {}", local_ba_function_tolerance));
   if (retriangulate_after_frames < 1)
     Fail(fmt::format("mapping: retriangulate_after_frames must be >= 1, got {}", retriangulate_after_frames));
   if (min_track_frames < 2) Fail(fmt::format("mapping: min_track_frames must be >= 2, got {}", min_track_frames));

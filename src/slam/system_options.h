@@ -182,13 +182,14 @@ struct MappingOptions {
   // of 4 % that let 7-Scenes' scale drift (ATE 6.9-7.2 cm; 4.9-5.3 cm with 0.02, seeds 1-10). A car at 1 m a frame is
   // already further apart than this: its windows are unchanged. 0: the newest keyframes, consecutive.
   double local_ba_min_step_of_depth = 0.02;
-  // Its Levenberg-Marquardt iteration cap. Every posed frame is a keyframe, so each adjustment starts from the last
-  // one's solution with one new view: three iterations do what ten did (with ten every call on the rendered paper
-  // scene ran to the cap without passing Ceres' convergence test) at about a third of the cost. Robustness matrix,
-  // seeds 1-10 against ten iterations: the same 72 of 90 cells; ATE per cell 0.72-1.11x the old on paper, rotation,
-  // planar, still-start, forward, KITTI 06 (0.93-1.07x) and 7-Scenes (0.99-1.03x); fast 0.90-1.21x but seed 3 2.2x
-  // (0.09 -> 0.19 % of the path: a pose 43 cm off at frame 29 that the pose step had lost before). docs/tuning.md.
-  int local_ba_iterations = 3;
+  // Its convergence test: an adjustment ends when a Levenberg-Marquardt iteration lowers its robust cost by less than
+  // this fraction of it, or after SystemOptions::ba_iterations. Every posed frame is a keyframe, so each adjustment
+  // starts from the last one's solution with one new view, and at Ceres' default (1e-6) every call on the rendered
+  // paper scene ran to the cap of 10, creeping by amounts no frame's pose shows. At 1e-3 a call takes 2-6 iterations
+  // where the views agree, and the cap where fixed points hold the solution far from where the poses put it (a run
+  // in a loaded map). A fixed cap of 3 instead let such a run leave the loaded map's frame (7-Scenes, seed 1: 15 cm
+  // and 6 % of scale off it, against 1 cm at 10 iterations and 3 cm at 1e-3). docs/tuning.md.
+  double local_ba_function_tolerance = 1e-3;
   // The local bundle adjustment of a keyframe solved on a thread of its own while the caller goes on to the next
   // frame (reads it, runs its front end), and applied at the start of the next System::Process (or Flush): the
   // next frame's pose step and mapping see the adjusted map as they would without it, so a folder of
@@ -209,9 +210,7 @@ StructureMethod ParseStructureMethod(const std::string& name);  // "mc" | "ba"
 struct SystemOptions {
   PoseMethod pose_method = PoseMethod::kMonteCarlo;
   StructureMethod structure_method = StructureMethod::kMonteCarlo;
-  int ba_iterations = 10;    // Levenberg-Marquardt iteration cap of the bundle adjustment baseline (StructureMethod::
-                             // kBundleAdjustment) and, 5x, of a provisional map's join (the local one's:
-                             // MappingOptions::local_ba_iterations)
+  int ba_iterations = 10;    // Levenberg-Marquardt iteration cap of the local bundle adjustment
   int ba_fixed_keyframes = 2;  // the oldest keyframes of the window held fixed (gauge, including scale)
   // The pose step's options; its seed is `seed` below and its sigma_trans_floor_m comes from
   // sigma_trans_floor_rel_depth at initialisation (what these two fields say here is not used).

@@ -207,26 +207,27 @@ TEST(System, TheLocalAdjustmentSpacesItsKeyframesByTheMoveAgainstTheDepth) {
   EXPECT_GE(paper, 2 * (adjusted - 1));
 }
 
-// MappingOptions::local_ba_iterations: each keyframe's local adjustment starts from the last one's solution with one
-// new view, so three Levenberg-Marquardt iterations reach what ten do. The noisy paper scenario (1 px, 10 %
-// outliers; 200 frames: the first map settles until about frame 95, the local adjustments run after it), seeds 1-3:
-// ATE with 3 within 10 % of ATE with 10 on every seed (measured at 300 frames, 2^18 hypotheses, seeds 1-5: -1.6 to
-// +1.7 %; the bound is six times that spread).
-TEST(System, TheLocalAdjustmentFromTheLastSolutionNeedsThreeIterations) {
-  auto ate = [](uint64_t seed, int iterations) {
+// MappingOptions::local_ba_function_tolerance: each keyframe's local adjustment starts from the last one's solution
+// with one new view, so it may stop once an iteration lowers its cost by less than 0.1 % instead of Ceres' 1e-6
+// (which every call on the paper scene ran to the cap of 10 without reaching). The noisy paper scenario (1 px, 10 %
+// outliers; 200 frames: the first map settles until about frame 95, the local adjustments run after it), seeds
+// 1-3: ATE at 1e-3 within 10 % of ATE at 1e-6 on every seed (measured with a cap of 3 iterations instead, at 300
+// frames and 2^18 hypotheses, seeds 1-5: -1.6 to +1.7 %; the bound is six times that spread).
+TEST(System, TheLocalAdjustmentStopsWhenAnIterationNoLongerLowersItsCost) {
+  auto ate = [](uint64_t seed, double tolerance) {
     const apps::SequenceInput in = Scenario(200, 1.0, 0.1, seed);
     SystemOptions o = FastOptions();
     o.seed = seed;
-    o.mapping.local_ba_iterations = iterations;
+    o.mapping.local_ba_function_tolerance = tolerance;
     const apps::SlamRunResult res = RunSystem(in, o, /*gt_scale=*/false);
     return eval::EvaluateTrajectory(in.groundtruth, apps::ReportsToTrajectory(res.reports, false)).ate_m.rmse;
   };
-  EXPECT_EQ(SystemOptions().mapping.local_ba_iterations, 3);
+  EXPECT_EQ(SystemOptions().mapping.local_ba_function_tolerance, 1e-3);
   for (uint64_t seed = 1; seed <= 3; ++seed) {
-    const double three = ate(seed, 3), ten = ate(seed, 10);
-    std::printf("[ local BA ] seed %llu: ATE %.5f m with 3 iterations, %.5f with 10\n",
-                static_cast<unsigned long long>(seed), three, ten);
-    EXPECT_LE(three, 1.1 * ten) << "seed " << seed;
+    const double loose = ate(seed, 1e-3), tight = ate(seed, 1e-6);
+    std::printf("[ local BA ] seed %llu: ATE %.5f m at a tolerance of 1e-3, %.5f at 1e-6\n",
+                static_cast<unsigned long long>(seed), loose, tight);
+    EXPECT_LE(loose, 1.1 * tight) << "seed " << seed;
   }
 }
 
@@ -607,7 +608,7 @@ TEST(SystemOptions, CheckNamesTheField) {
       {"calibration_min_z", [](SystemOptions& x) { x.init.calibration_min_z = std::nan(""); }},
       {"calibration_min_shift_px", [](SystemOptions& x) { x.init.calibration_min_shift_px = -1; }},
       {"calibration_min_half_share", [](SystemOptions& x) { x.init.calibration_min_half_share = 1.5; }},
-      {"local_ba_iterations", [](SystemOptions& x) { x.mapping.local_ba_iterations = 0; }}};
+      {"local_ba_function_tolerance", [](SystemOptions& x) { x.mapping.local_ba_function_tolerance = -1e-3; }}};
   for (const auto& [field, spoil] : calibration) {
     o = {};
     spoil(o);
