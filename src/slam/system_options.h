@@ -187,7 +187,7 @@ struct MappingOptions {
   // starts from the last one's solution with one new view, and at Ceres' default (1e-6) every call on the rendered
   // paper scene ran to the cap of 10, creeping by amounts no frame's pose shows. At 1e-3 a call takes 2-6 iterations
   // where the views agree, and the cap where fixed points hold the solution far from where the poses put it (a run
-  // in a loaded map). A fixed cap of 3 instead let such a run leave the loaded map's frame (7-Scenes, seed 1: 15 cm
+  // in a loaded map). A fixed cap of 3 instead let such a run leave the loaded map's frame (7-Scenes, seed 1: 12 cm
   // and 6 % of scale off it, against 1 cm at 10 iterations and 3 cm at 1e-3). docs/tuning.md.
   double local_ba_function_tolerance = 1e-3;
   // The local bundle adjustment of a keyframe solved on a thread of its own while the caller goes on to the next
