@@ -48,25 +48,34 @@ struct Scene {
 
 // Up to 100 iterations, the first two cameras held: they fix the gauge, scale included.
 BundleAdjustSummary AdjustWithTheFirstTwoFixed(std::vector<Pose>& cams, std::vector<Eigen::Vector3d>& pts,
-                                               const std::vector<BundleObservation>& obs) {
+                                               const std::vector<BundleObservation>& obs,
+                                               double function_tolerance = BundleAdjustOptions().function_tolerance) {
   std::vector<bool> fixed(cams.size(), false);
   fixed[0] = fixed[1] = true;
   BundleAdjustOptions o;
   o.max_iterations = 100;
+  o.function_tolerance = function_tolerance;
   return BundleAdjust(cams, pts, obs, fixed, o);
+}
+
+// The scene's cameras but the first two moved by ~1 cm and ~0.3 deg, its points by ~2 cm (seeded).
+void PerturbedStart(const Scene& truth, std::vector<Pose>* cams, std::vector<Eigen::Vector3d>* pts) {
+  *cams = truth.cams;
+  *pts = truth.pts;
+  CounterRng rng(2, 0);
+  for (size_t c = 2; c < cams->size(); ++c) {
+    const Eigen::Vector3d dt = NormalVector(rng, 0.01);  // translation before rotation: GCC's order, as above
+    const Eigen::Vector3d dw = NormalVector(rng, 0.005);
+    (*cams)[c] = Pose((*cams)[c].q * QuaternionFromRotationVector(dw), (*cams)[c].t + dt);
+  }
+  for (auto& p : *pts) p += NormalVector(rng, 0.02);
 }
 
 TEST(BundleAdjust, RecoversPerturbedPosesAndPoints) {
   const Scene truth;
-  std::vector<Pose> cams = truth.cams;
-  std::vector<Eigen::Vector3d> pts = truth.pts;
-  CounterRng rng(2, 0);
-  for (size_t c = 2; c < cams.size(); ++c) {
-    const Eigen::Vector3d dt = NormalVector(rng, 0.01);  // translation before rotation: GCC's order, as above
-    const Eigen::Vector3d dw = NormalVector(rng, 0.005);
-    cams[c] = Pose(cams[c].q * QuaternionFromRotationVector(dw), cams[c].t + dt);
-  }
-  for (auto& p : pts) p += NormalVector(rng, 0.02);
+  std::vector<Pose> cams;
+  std::vector<Eigen::Vector3d> pts;
+  PerturbedStart(truth, &cams, &pts);
   const BundleAdjustSummary s = AdjustWithTheFirstTwoFixed(cams, pts, truth.obs);
   EXPECT_GT(s.initial_rms_px, 1.0);
   EXPECT_LT(s.final_rms_px, 1e-4);  // exact data: converges to zero residual (float-free double solve)
@@ -89,21 +98,10 @@ TEST(BundleAdjust, ALooserFunctionToleranceStopsSoonerAtAboutTheSameResidual) {
     o.uv_norm += Eigen::Vector2d(dx, dy) * (0.5 / 500.0);  // 0.5 px at the default focal length of 500 px
   }
   auto adjust = [&](double tolerance) {
-    std::vector<Pose> cams = truth.cams;
-    std::vector<Eigen::Vector3d> pts = truth.pts;
-    CounterRng rng(2, 0);
-    for (size_t c = 2; c < cams.size(); ++c) {
-      const Eigen::Vector3d dt = NormalVector(rng, 0.01);
-      const Eigen::Vector3d dw = NormalVector(rng, 0.005);
-      cams[c] = Pose(cams[c].q * QuaternionFromRotationVector(dw), cams[c].t + dt);
-    }
-    for (auto& p : pts) p += NormalVector(rng, 0.02);
-    std::vector<bool> fixed(cams.size(), false);
-    fixed[0] = fixed[1] = true;
-    BundleAdjustOptions o;
-    o.max_iterations = 100;
-    o.function_tolerance = tolerance;
-    return BundleAdjust(cams, pts, noisy, fixed, o);
+    std::vector<Pose> cams;
+    std::vector<Eigen::Vector3d> pts;
+    PerturbedStart(truth, &cams, &pts);
+    return AdjustWithTheFirstTwoFixed(cams, pts, noisy, tolerance);
   };
   const BundleAdjustSummary tight = adjust(1e-6), loose = adjust(1e-3);
   std::printf("[ tolerance ] 1e-6: %d iterations, %.5f px; 1e-3: %d iterations, %.5f px\n", tight.iterations,
