@@ -250,9 +250,10 @@ int Mapper::TriangulateNewPoints(int slot, int inliers) {
     p.id = f.id;
     p.position_in_world = t.point_in_world;
     p.last_seen_frame = cur.index;
-    if (existing)
+    if (existing) {
       *existing = p;
-    else
+      s_.loaded_points.erase(p.id);  // where this run's views put it, no longer where a loaded map did
+    } else
       s_.map.Add(p);
     if (bridge_.active()) bridge_.AddPoint(p.id);
     ++added;

@@ -42,8 +42,9 @@ struct SlamState {
   std::unique_ptr<PoseTracker> pose_step;  // §5, from construction (System); its translation floor set at initialisation
   PoseSmoother smoother;
   std::function<std::optional<double>(double, double)> oracle;  // --gt-scale: the true baseline between two stamps
-  // The points of a map this run started in (System::StartInMap): the adjustments hold them fixed, and the map is
-  // never dropped for a new one (System::MaybeRestart).
+  // The points of a map this run started in (System::StartInMap): the adjustments (local bundle adjustment, the
+  // Monte Carlo point adjustment, a bridge's) hold them fixed, and the map is never dropped for a new one
+  // (System::MaybeRestart). One removed and triangulated again from this run's views leaves the set.
   std::unordered_set<int64_t> loaded_points;
 
   bool initialised = false;

@@ -82,6 +82,9 @@ class System {
   // A point the pose step and the remapping may use now: any, or while a provisional map is tracked only its own
   // (the rest of the map is at another scale).
   bool AtCurrentScale(int64_t point_id) const;
+  // A point of the map this run started in (StartInMap), held where that map put it: no adjustment moves it. One
+  // that left the map and was triangulated again from this run's views is this run's from then on.
+  bool Loaded(int64_t point_id) const;
   // (This reference, and those of merged_tracks, camera, self_calibration and result_map, hold until the next Process,
   // Flush or Finish: a restart replaces the map and the stages that keep them.)
   const Map& map() const;
