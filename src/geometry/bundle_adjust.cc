@@ -132,7 +132,14 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
   for (size_t j = 0; j < fixed_points.size(); ++j)
     if (fixed_points[j] && problem.HasParameterBlock(pts[j].data())) problem.SetParameterBlockConstant(pts[j].data());
   ceres::Solver::Options so;
-  so.linear_solver_type = options.dense_schur ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+  switch (options.linear_solver) {
+    case BundleAdjustOptions::LinearSolver::kSparseSchur: so.linear_solver_type = ceres::SPARSE_SCHUR; break;
+    case BundleAdjustOptions::LinearSolver::kDenseSchur: so.linear_solver_type = ceres::DENSE_SCHUR; break;
+    case BundleAdjustOptions::LinearSolver::kIterativeSchur:
+      so.linear_solver_type = ceres::ITERATIVE_SCHUR;
+      so.preconditioner_type = ceres::JACOBI;
+      break;
+  }
   so.max_num_iterations = options.max_iterations;
   so.function_tolerance = options.function_tolerance;
   so.num_threads = options.num_threads;

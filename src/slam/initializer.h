@@ -54,8 +54,7 @@ class Initializer {
   // nullopt with *failure (when given) saying why.
   std::optional<InitHypothesis> RefineInitWindow(const std::vector<int>& window, const std::optional<Pose>& last_from_ref,
                                                  std::vector<Eigen::Vector3d> points, std::vector<int64_t> point_ids,
-                                                 std::string* failure, bool check_parallax = true,
-                                                 bool dense_schur = false) const;
+                                                 std::string* failure, bool check_parallax = true) const;
   // The two-view solutions between the first and the last frame of `window` (n1, n2: normalised coordinates of
   // their shared features `ids`), each refined over the window, and the depth-reversal ambiguity test: the best
   // one, in the first frame's camera, or nullopt with *why (*rejected when an ambiguity refused a solution).

@@ -420,7 +420,7 @@ std::unique_ptr<Mapper::LocalBa> Mapper::PrepareLocalBa(int slot) {
   bo.function_tolerance = mo.local_ba_function_tolerance;
   // A few tens of cameras: the dense Schur complement solves the same steps as the sparse one, 5-12 % faster
   // on the shared sequences (the same trajectories to the printed digit; docs/timing.md).
-  bo.dense_schur = true;
+  bo.linear_solver = geometry::BundleAdjustOptions::LinearSolver::kDenseSchur;
   // A loaded map is the frame this run localises in: its points are held where it put them.
   std::vector<bool> fixed_points;
   if (!s_.loaded_points.empty()) {

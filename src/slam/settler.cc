@@ -84,7 +84,10 @@ void Settler::Settle(int slot, std::vector<FrameReport>* out) {
   bo.cauchy = true;  // tens of frames of tracks hold wrong matches: their pull must fade
   // One thread: Ceres' multi-threaded Schur elimination sums in a varying order, and the same seed must give
   // the same trajectory.
-  bo.dense_schur = true;  // tens of cameras that all see the same few hundred points
+  // Tens to 120 cameras that all see the same few hundred points: the Schur complement is not formed
+  // (BundleAdjustOptions::LinearSolver::kIterativeSchur; 7-Scenes' four settling steps of 54-114 frames 5.8 -> 3.1 s
+  // against the dense Schur complement, the trajectory the same to 1e-7 m).
+  bo.linear_solver = geometry::BundleAdjustOptions::LinearSolver::kIterativeSchur;
   geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   std::string reversal;
   if (FlipIfMirrored(window, &cams, &wp, &reversal)) geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
@@ -294,9 +297,9 @@ bool Settler::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* 
   }
   if (sub_ids.size() < 3) return false;
   const std::optional<Initializer::InitHypothesis> as_is =
-      init_.RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false, true);
+      init_.RefineInitWindow(sub, std::nullopt, sub_in_ref, sub_ids, nullptr, false);
   const std::optional<Initializer::InitHypothesis> sub_mirror =
-      init_.RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false, true);
+      init_.RefineInitWindow(sub, std::nullopt, MirrorInDepth(sub_in_ref), sub_ids, nullptr, false);
   if (!as_is || !sub_mirror) return false;
   // The map as it is needs no new placement: the settling's adjustment has just fitted it to the whole window, and
   // its cost over the frames judged is a fit the placement from scratch may miss (PnP through 10 % outliers and a
@@ -326,7 +329,7 @@ bool Settler::FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* 
   if (!(chi2 >= s_.options.init.ambiguity_chi2) || !(as_is_cost >= kFlipCostRatio * sub_mirror->cost)) return false;
   // Taken: the whole window's mirror, placed and refined (once in a run that needs it).
   const std::optional<Initializer::InitHypothesis> mirror =
-      init_.RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false, true);
+      init_.RefineInitWindow(window, std::nullopt, MirrorInDepth(in_ref), ids, nullptr, false);
   if (!mirror) return false;
   const Pose world_from_ref = ref.Inverse();
   for (size_t w = 0; w < window.size(); ++w) (*cams)[w] = mirror->poses[w] * ref;
