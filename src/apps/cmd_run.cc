@@ -499,7 +499,7 @@ void RegisterRun(CLI::App& app) {
   cmd->add_option("--merge-revisited-points", args->system.mapping.merge_revisited_points,
                   "A new track whose point is where a map point not seen in the frame projects, in every view it is "
                   "triangulated from, goes on as that point (false: it makes a new point; off by default until the "
-                  "two runs it worsens are understood, docs/tuning.md)")
+                  "two runs it worsens are understood, docs/tuning.md; always on in a map loaded by --load-map)")
       ->capture_default_str();
   cmd->add_option("--min-parallax-deg", args->system.mapping.min_parallax_deg,
                   "Smallest parallax for a new point (largest angle between its viewing rays)")

@@ -182,10 +182,11 @@ int Mapper::TriangulateNewPoints(int slot, int inliers) {
   const bool starving = inliers < mo.starving_inliers;
   to.min_parallax_deg = starving ? std::min(wanted, mo.starving_parallax_deg) : wanted;
   const int min_views = starving ? std::min(mo.min_track_frames, mo.starving_min_track_frames) : mo.min_track_frames;
-  // The map points this frame does not observe, where they project into it (merge_revisited_points). Not on a
-  // provisional map: the rest of the map is at another scale.
+  // The map points this frame does not observe, where they project into it (merge_revisited_points; always in a
+  // loaded map, which is a place this run came back to: docs/map_format.md). Not on a provisional map: the rest of
+  // the map is at another scale.
   std::vector<std::pair<int64_t, Eigen::Vector2d>> unseen;
-  if (mo.merge_revisited_points && !bridge_.active())
+  if ((mo.merge_revisited_points || !s_.loaded_points.empty()) && !bridge_.active())
     for (const MapPoint& p : s_.map.points()) {
       Eigen::Vector2d uv;
       if (p.state != PointState::kRemoved && !cur.Find(p.id) &&
