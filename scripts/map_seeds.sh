@@ -70,7 +70,7 @@ for kind, seed, reloc, unaligned, d in rows:
     ga, gb = a["ground_truth"], (b or {}).get("ground_truth")
     ate1 = ga["ate_m"]["rmse"]
     un = float(unaligned) * ga["scale"]
-    where = reloc.replace("_", " ").replace("relocalised from", "from").replace(" of ", " of ") + " matches" if reloc != "none" else "never"
+    where = reloc.replace("_", " ").replace("relocalised from", "from") + " matches" if reloc != "none" else "never"
     print("| %s | %s | %s | %d / %d | %.1f | %s | %.1f | %.2fx | %s | %d -> %s |" % (
         names[kind], seed, where, b["tracked"] if b else 0, b["frames"] if b else a["frames"], ate1 * 1e3,
         "%.1f" % (gb["ate_m"]["rmse"] * 1e3) if gb else "-", un * 1e3, un / ate1,

@@ -276,7 +276,7 @@ int Bridge::AdjustJoined(int slot, FrameReport* r) {
     for (const FeatureUndistorted& f : s_.map.frames[window[w]].features) {
       MapPoint* p = s_.map.Find(f.id);
       if (!p || p->state == PointState::kRemoved) continue;
-      const bool held = !state_->points.count(f.id) || s_.loaded_points.count(f.id) > 0;
+      const bool held = !state_->points.count(f.id) || s_.IsLoaded(f.id);
       if (!held && count[f.id] < 2) continue;
       auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
       if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world), fixed_points.push_back(held);

@@ -355,7 +355,7 @@ void Mapper::BundleAdjustWindow(int slot, FrameReport* r) {
   bo.huber_px = s_.options.init.refine_huber_px;
   bo.max_iterations = s_.options.ba_iterations;
   bo.cauchy = true;  // wrong matches of tens of pixels must stop pulling (Huber's pull never fades)
-  geometry::BundleAdjust(cams, X, obs, fixed, bo);
+  geometry::BundleAdjust(cams, X, obs, fixed, bo, s_.HeldPoints(wp));  // a loaded map's points held
   for (size_t w = 0; w < window.size(); ++w) s_.map.frames[window[w]].cam_from_world = cams[w];
   const int removed = s_.StoreAdjustedPoints(cams, wp, s_.map.frames[slot].index);
   r->removed += removed;
@@ -423,11 +423,7 @@ std::unique_ptr<Mapper::LocalBa> Mapper::PrepareLocalBa(int slot) {
   // on the shared sequences (the same trajectories to the printed digit; docs/timing.md).
   bo.linear_solver = geometry::BundleAdjustOptions::LinearSolver::kDenseSchur;
   // A loaded map is the frame this run localises in: its points are held where it put them.
-  std::vector<bool> fixed_points;
-  if (!s_.loaded_points.empty()) {
-    fixed_points.resize(wp.pts.size());
-    for (size_t i = 0; i < wp.pts.size(); ++i) fixed_points[i] = s_.loaded_points.count(wp.pts[i]->id) > 0;
-  }
+  std::vector<bool> fixed_points = s_.HeldPoints(wp);
   auto ba = std::make_unique<LocalBa>();
   ba->slot = slot;
   ba->window = std::move(window);

@@ -55,7 +55,7 @@ void PointAdjuster::AdjustPoints(int slot, FrameReport* r) {
     MapPoint* p = s_.map.Find(f.id);
     if (!p || p->state == PointState::kRemoved) continue;
     // A loaded map's points are where that map put them (the frame this run localises in): not re-sampled.
-    if (s_.loaded_points.count(p->id)) continue;
+    if (s_.IsLoaded(p->id)) continue;
     views.clear();
     for (size_t w = 0; w < window.size(); ++w)
       if (const FeatureUndistorted* o = s_.map.frames[window[w]].Find(f.id)) views.emplace_back(static_cast<int>(w), o->uv_px);

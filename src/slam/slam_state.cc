@@ -63,6 +63,14 @@ WindowPoints SlamState::CollectWindowPoints(const std::vector<int>& window) {
   return wp;
 }
 
+std::vector<bool> SlamState::HeldPoints(const WindowPoints& wp) const {
+  std::vector<bool> held;
+  if (loaded_points.empty()) return held;
+  held.reserve(wp.pts.size());
+  for (const MapPoint* p : wp.pts) held.push_back(IsLoaded(p->id));
+  return held;
+}
+
 int SlamState::StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index) {
   std::vector<std::vector<double>> residuals(wp.pts.size());
   for (const geometry::BundleObservation& o : wp.obs)

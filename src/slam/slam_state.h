@@ -43,7 +43,7 @@ struct SlamState {
   PoseSmoother smoother;
   std::function<std::optional<double>(double, double)> oracle;  // --gt-scale: the true baseline between two stamps
   // The points of a map this run started in (System::StartInMap): the adjustments (local bundle adjustment, the
-  // Monte Carlo point adjustment, a bridge's) hold them fixed, and the map is never dropped for a new one
+  // Monte Carlo point adjustment or the bundle adjustment in its place, a bridge's) hold them fixed, and the map is never dropped for a new one
   // (System::MaybeRestart). One removed and triangulated again from this run's views leaves the set.
   std::unordered_set<int64_t> loaded_points;
 
@@ -70,6 +70,10 @@ struct SlamState {
   // The Fibonacci-spaced posed keyframes (§6.3), newest first.
   std::vector<int> WindowSlots() const;
   WindowPoints CollectWindowPoints(const std::vector<int>& window);
+  // A point of the map this run started in (loaded_points): no adjustment moves it.
+  bool IsLoaded(int64_t point_id) const { return loaded_points.count(point_id) > 0; }
+  // Per point of `wp`, whether a bundle adjustment holds it fixed (IsLoaded); empty when no map was loaded.
+  std::vector<bool> HeldPoints(const WindowPoints& wp) const;
   // Writes the adjusted positions back; a point whose median residual over the window (at least 3 views)
   // is above the outlier threshold leaves the map. Returns how many left.
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);

@@ -291,7 +291,7 @@ const Map& System::result_map() const {
 bool System::bridging() const { return st_->bridge.active(); }
 bool System::Provisional(int64_t point_id) const { return st_->bridge.Provisional(point_id); }
 bool System::AtCurrentScale(int64_t point_id) const { return st_->bridge.AtCurrentScale(point_id); }
-bool System::Loaded(int64_t point_id) const { return st_->state.loaded_points.count(point_id) > 0; }
+bool System::Loaded(int64_t point_id) const { return st_->state.IsLoaded(point_id); }
 const std::vector<std::pair<int64_t, int64_t>>& System::merged_tracks() const { return st_->mapper.merged_tracks(); }
 const PinholeCamera& System::camera() const { return st_->state.camera; }
 const SelfCalibration& System::self_calibration() const {

@@ -599,7 +599,8 @@ TEST(VisualSlamMap, AMapLoadedAndSavedAgainIsTheSameFile) {
 }
 
 // A run in a loaded map localises in that map's frame: none of its points is moved, by the local bundle adjustment
-// (which holds them fixed) or by the Monte Carlo point adjustment (which skips them); one that left the map and was
+// (which holds them fixed), by the Monte Carlo point adjustment (which skips them) or by the bundle adjustment that
+// --structure ba runs in its place (which holds them fixed too); one that left the map and was
 // triangulated again from this run's views is this run's (System::Loaded false). Before the point adjustment
 // skipped them, it re-sampled loaded points whose residual in this run was over its candidate threshold: on 7-Scenes
 // a tenth of them moved by up to 9 map units and the second run drifted 10 % in scale out of the map
@@ -615,28 +616,34 @@ TEST(VisualSlamMap, ARunInALoadedMapMovesNoneOfItsPoints) {
   std::map<int64_t, Eigen::Vector3d> where;
   for (const io::MapFilePoint& p : map.points) where[p.id] = p.position_in_world;
 
-  VisualSlam second = Make(scene);
-  second.LoadMap(map);
-  Reports reports;
-  for (int i = 0; i < kFrames; ++i) Keep(second.Process(scene.Frame(i), i, i / kFps), &reports);
-  for (const slam::FrameReport& r : second.Finish()) reports[r.index] = r;
-  int tracked = 0, adjusted = 0;
-  for (const auto& [i, r] : reports) tracked += r.status == slam::FrameStatus::kTracked, adjusted += r.adjusted;
-  EXPECT_EQ(tracked, kFrames);
-  EXPECT_GT(adjusted, 0);  // the adjustments ran
-  int held = 0;
-  for (const slam::MapPoint& p : second.system().map().points()) {
-    if (!second.system().Loaded(p.id)) {
-      EXPECT_FALSE(where.count(p.id) && p.state != slam::PointState::kRemoved && p.position_in_world == where.at(p.id))
-          << "point " << p.id << " is the loaded map's, where it put it, but not held";
-      continue;
+  // The default structure step, and the bundle adjustment that takes its place (--structure ba, §8's baseline).
+  for (const slam::StructureMethod method : {slam::StructureMethod::kMonteCarlo, slam::StructureMethod::kBundleAdjustment}) {
+    SCOPED_TRACE(method == slam::StructureMethod::kMonteCarlo ? "Monte Carlo structure" : "bundle adjustment structure");
+    VisualSlamOptions options;
+    options.system.structure_method = method;
+    VisualSlam second(scene.seq.camera, options, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+    second.LoadMap(map);
+    Reports reports;
+    for (int i = 0; i < kFrames; ++i) Keep(second.Process(scene.Frame(i), i, i / kFps), &reports);
+    for (const slam::FrameReport& r : second.Finish()) reports[r.index] = r;
+    int tracked = 0, adjusted = 0;
+    for (const auto& [i, r] : reports) tracked += r.status == slam::FrameStatus::kTracked, adjusted += r.adjusted;
+    EXPECT_EQ(tracked, kFrames);
+    EXPECT_GT(adjusted, 0);  // the adjustments ran
+    int held = 0;
+    for (const slam::MapPoint& p : second.system().map().points()) {
+      if (!second.system().Loaded(p.id)) {
+        EXPECT_FALSE(where.count(p.id) && p.state != slam::PointState::kRemoved && p.position_in_world == where.at(p.id))
+            << "point " << p.id << " is the loaded map's, where it put it, but not held";
+        continue;
+      }
+      ASSERT_TRUE(where.count(p.id)) << "point " << p.id << " is this run's, not the loaded map's";
+      EXPECT_EQ(p.position_in_world, where.at(p.id)) << "loaded point " << p.id << " moved";
+      held += p.state != slam::PointState::kRemoved;
     }
-    ASSERT_TRUE(where.count(p.id)) << "point " << p.id << " is this run's, not the loaded map's";
-    EXPECT_EQ(p.position_in_world, where.at(p.id)) << "loaded point " << p.id << " moved";
-    held += p.state != slam::PointState::kRemoved;
+    // Most of the map stays in it: a run that dropped its loaded points would hold nothing.
+    EXPECT_GE(held, static_cast<int>(map.points.size()) / 2) << "of " << map.points.size();
   }
-  // Most of the map stays in it: a run that dropped its loaded points would hold nothing.
-  EXPECT_GE(held, static_cast<int>(map.points.size()) / 2) << "of " << map.points.size();
 }
 
 TEST(VisualSlamMap, AMapIsRefusedWhereItCannotBeUsed) {
