@@ -5,9 +5,11 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <functional>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
 
 namespace mcslam::frontend {
 
@@ -45,20 +47,42 @@ double NoiseCornerResponse(int block_size, double fraction) {
   rng.fill(noise, cv::RNG::NORMAL, 128.0, kSigma);
   cv::Mat gray;
   noise.convertTo(gray, CV_8U);
-  cv::Mat response;
-  cv::cornerMinEigenVal(gray, response, block_size, 3);
-  // Away from the border, where the filters see the replicated edge.
+  // Away from the border, where the filters see the replicated edge. The response computed in bands of rows,
+  // each a view into the noise image (its filters read the real rows beyond the band, as over the whole image: the
+  // values are the same to the bit), on both cores: small buffers that stay in cache instead of 16 MB of fresh
+  // ones (the whole image at once: 78 ms on the development machine, most of it page faults).
   const int margin = block_size + 2;
-  std::vector<float> values;
-  values.reserve(static_cast<size_t>((kSide - 2 * margin) * (kSide - 2 * margin)));
-  for (int y = margin; y < kSide - margin; ++y) {
-    const float* r = response.ptr<float>(y);
-    values.insert(values.end(), r + margin, r + kSide - margin);
-  }
+  const int interior = kSide - 2 * margin;
+  // The value exceeded by `fraction` of the n responses is the one of rank k (0-based, ascending): the
+  // (n - k)-th largest, found among each band's n - k largest.
+  const size_t n = static_cast<size_t>(interior) * static_cast<size_t>(interior);
   const double q = std::clamp(1.0 - fraction, 0.0, 1.0);
-  const size_t k = std::min(values.size() - 1, static_cast<size_t>(q * static_cast<double>(values.size())));
-  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
-  return static_cast<double>(values[k]) / (kSigma * kSigma);
+  const size_t k = std::min(n - 1, static_cast<size_t>(q * static_cast<double>(n)));
+  const size_t keep = n - k;
+  constexpr int kBandRows = 64;
+  const int bands = (interior + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<float>> band_values(static_cast<size_t>(bands));
+  tbb::parallel_for(0, bands, [&](int band) {
+    const int y0 = margin + band * kBandRows, y1 = std::min(y0 + kBandRows, kSide - margin);
+    const int top = std::max(0, y0 - margin), bottom = std::min(kSide, y1 + margin);
+    cv::Mat response;
+    cv::cornerMinEigenVal(gray.rowRange(top, bottom), response, block_size, 3);
+    std::vector<float>& v = band_values[static_cast<size_t>(band)];
+    v.reserve(static_cast<size_t>((y1 - y0) * interior));
+    for (int y = y0; y < y1; ++y) {
+      const float* r = response.ptr<float>(y - top);
+      v.insert(v.end(), r + margin, r + kSide - margin);
+    }
+    if (v.size() > keep) {
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(keep), v.end(), std::greater<float>());
+      v.resize(keep);
+    }
+  });
+  std::vector<float> largest;
+  for (const std::vector<float>& v : band_values) largest.insert(largest.end(), v.begin(), v.end());
+  std::nth_element(largest.begin(), largest.begin() + static_cast<std::ptrdiff_t>(keep - 1), largest.end(),
+                   std::greater<float>());
+  return static_cast<double>(largest[keep - 1]) / (kSigma * kSigma);
 }
 
 }  // namespace mcslam::frontend

@@ -1,7 +1,9 @@
 // The image-noise measure and the Shi-Tomasi response of pure noise (frontend/image_noise.h).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -65,6 +67,32 @@ TEST(ImageNoise, NoiseCornerResponseScalesWithTheVariance) {
   EXPECT_LT(above, 2e-3);
   // A rarer response is a larger one.
   EXPECT_GT(NoiseCornerResponse(3, 1e-5), 1.5 * unit);
+}
+
+// The response is computed in bands of rows on both cores and ranked among each band's largest: the same value, to
+// the bit, as the whole noise image's response ranked at once (the measurement as first written), for several
+// windows and fractions. Exact: the bands are views into one image, so their filters see the same pixels.
+TEST(ImageNoise, NoiseCornerResponseIsTheWholeImagesQuantile) {
+  cv::Mat noise(1024, 1024, CV_32F);
+  cv::RNG rng(0x5eed);  // the measurement's own noise image
+  rng.fill(noise, cv::RNG::NORMAL, 128.0, 8.0);
+  cv::Mat gray;
+  noise.convertTo(gray, CV_8U);
+  for (int block : {3, 5, 7}) {
+    cv::Mat response;
+    cv::cornerMinEigenVal(gray, response, block, 3);
+    const int margin = block + 2;
+    std::vector<float> values;
+    for (int y = margin; y < 1024 - margin; ++y)
+      values.insert(values.end(), response.ptr<float>(y) + margin, response.ptr<float>(y) + 1024 - margin);
+    for (double fraction : {0.0, 1e-5, 1e-3, 0.5, 1.0}) {
+      const size_t k = std::min(values.size() - 1, static_cast<size_t>((1.0 - fraction) * static_cast<double>(values.size())));
+      std::vector<float> sorted = values;
+      std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
+      EXPECT_EQ(NoiseCornerResponse(block, fraction), static_cast<double>(sorted[k]) / 64.0)
+          << "block " << block << " fraction " << fraction;
+    }
+  }
 }
 
 }  // namespace
