@@ -172,14 +172,13 @@ std::optional<Initializer::InitHypothesis> Initializer::RefineInitWindow(const s
   // Every frame placed against the points on its own (in parallel: a placement that finds no consensus, as a
   // mirror's often does, runs all its RANSAC iterations, 8 ms a frame on KITTI 06), then one that failed takes its
   // predecessor's pose, in the window's order.
+  auto given = [&](size_t w) { return last_from_ref && w + 1 == window.size(); };  // the last frame's pose, given
   std::vector<std::optional<Pose>> placed(window.size());
   tbb::parallel_for(size_t{1}, window.size(), [&](size_t w) {
-    if (!(last_from_ref && w + 1 == window.size())) placed[w] = geometry::SolvePnp(P[w], uv[w], po);
+    if (!given(w)) placed[w] = geometry::SolvePnp(P[w], uv[w], po);
   });
-  for (size_t w = 1; w < window.size(); ++w) {
-    if (last_from_ref && w + 1 == window.size()) continue;
-    h.poses[w] = placed[w] ? *placed[w] : h.poses[w - 1];
-  }
+  for (size_t w = 1; w < window.size(); ++w)
+    if (!given(w)) h.poses[w] = placed[w] ? *placed[w] : h.poses[w - 1];
   geometry::BundleAdjustOptions bo;
   bo.focal_px = focal;
   bo.huber_px = io.refine_huber_px;
