@@ -6,8 +6,9 @@
 
 #include <ceres/ceres.h>
 #include <ceres/product_manifold.h>
-#include <ceres/rotation.h>
 #include <fmt/format.h>
+
+#include "geometry/reprojection_cost.h"
 
 namespace mcslam::geometry {
 
@@ -30,48 +31,6 @@ double ReprojectionErrorPx(const Pose& cam_from_world, const Eigen::Vector3d& po
 }
 
 namespace {
-
-// The pixel residual of a point p in camera coordinates seen at normalised (u, v); false behind the camera (for
-// a step that puts it there: Ceres rejects the step).
-template <typename T>
-bool PixelResidual(const T* p, double u, double v, double f, T* r) {
-  if (!(p[2] > T(1e-9))) return false;
-  r[0] = T(f) * (p[0] / p[2] - T(u));
-  r[1] = T(f) * (p[1] / p[2] - T(v));
-  return true;
-}
-
-// Reprojection residual in pixels of a camera's pose block: its rotation as a quaternion stored (x, y, z, w) as
-// Eigen does, then its translation. One block a camera, not two: the Schur complement then has a quarter of the
-// camera-camera cells (Ceres locks each cell it updates).
-struct ReprojectionError {
-  ReprojectionError(const Eigen::Vector2d& uv, double focal) : u(uv.x()), v(uv.y()), f(focal) {}
-  template <typename T>
-  bool operator()(const T* pose, const T* X, T* r) const {
-    const T q_wxyz[4] = {pose[3], pose[0], pose[1], pose[2]};
-    T p[3];
-    ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
-    p[0] += pose[4], p[1] += pose[5], p[2] += pose[6];
-    return PixelResidual(p, u, v, f, r);
-  }
-  double u, v, f;
-};
-
-// The same residual seen by a camera held fixed: only the point varies, so its Jacobian is the only one formed
-// (a quarter of the dual numbers' width). Most of a local adjustment's observations are of this kind.
-struct FixedCameraReprojectionError {
-  FixedCameraReprojectionError(const Pose& cam_from_world, const Eigen::Vector2d& uv, double focal)
-      : R(cam_from_world.q.normalized().toRotationMatrix()), t(cam_from_world.t), u(uv.x()), v(uv.y()), f(focal) {}
-  template <typename T>
-  bool operator()(const T* X, T* r) const {
-    T p[3];
-    for (int i = 0; i < 3; ++i) p[i] = T(R(i, 0)) * X[0] + T(R(i, 1)) * X[1] + T(R(i, 2)) * X[2] + T(t[i]);
-    return PixelResidual(p, u, v, f, r);
-  }
-  Eigen::Matrix3d R;
-  Eigen::Vector3d t;
-  double u, v, f;
-};
 
 double RmsPx(const std::vector<Pose>& cams, const std::vector<Eigen::Vector3d>& pts,
              const std::vector<BundleObservation>& obs, double focal) {
@@ -116,13 +75,11 @@ BundleAdjustSummary BundleAdjust(std::vector<Pose>& cams, std::vector<Eigen::Vec
       continue;
     }
     if (fixed[static_cast<size_t>(o.camera)]) {
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FixedCameraReprojectionError, 2, 3>(
-                                   new FixedCameraReprojectionError(cams[o.camera], o.uv_norm, options.focal_px)),
-                               loss, pts[o.point].data());
+      problem.AddResidualBlock(new FixedCameraReprojectionCost(cams[o.camera], o.uv_norm, options.focal_px), loss,
+                               pts[o.point].data());
       continue;
     }
-    auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 7, 3>(
-        new ReprojectionError(o.uv_norm, options.focal_px));
+    auto* cost = new ReprojectionCost(o.uv_norm, options.focal_px);
     problem.AddResidualBlock(cost, loss, pose[o.camera].data(), pts[o.point].data());
   }
   for (size_t i = 0; i < cams.size(); ++i)
