@@ -93,6 +93,40 @@ TEST(PoseKernelCpu, FindsAShiftedPose) {
   EXPECT_GT(best.index, 0);
 }
 
+// The branch and bound of a search that wants only the best (no all_scores): the same winner, the same score to
+// the bit and the same quaternion as the search that scores every hypothesis in full, on tracking-shaped frames
+// (noise, outliers, the winner a sampled hypothesis) of 17-300 points, counts that are not multiples of the SIMD
+// width or the chunk, one and two threads; and on a table of identical hypotheses (zero spread: every score equal),
+// where only the strict test keeps the tie at the lowest index, 0.
+TEST(PoseKernelCpu, StoppingHopelessHypothesesEarlyKeepsTheWinner) {
+  for (int points : {17, 120, 300}) {
+    for (uint64_t seed : {17, 18, 19}) {
+      PoseFixture fx(points, seed);
+      fx.MoveCamera(0.01f, 0.5f, 1.0f, 0.1f, seed);
+      for (int count : {5000, 1 << 16}) {
+        const NormalTable table(count, seed + 100);
+        for (int threads : {1, 2}) {
+          auto kernel = MakeCpuPoseKernel(threads);
+          std::vector<float> all(count);
+          const BestHypothesis full = kernel->Score(fx.sampling, fx.View(), fx.params, table, count, all.data());
+          const BestHypothesis bound = kernel->Score(fx.sampling, fx.View(), fx.params, table, count);
+          EXPECT_EQ(bound.index, full.index) << points << " points, seed " << seed << ", " << count << ", " << threads;
+          EXPECT_EQ(bound.score, full.score) << points << " points, seed " << seed;
+          for (int k = 0; k < 4; ++k) EXPECT_EQ(bound.q[k], full.q[k]);
+          EXPECT_GT(full.index, 0);  // a sampled hypothesis, not the centre: the search had something to find
+        }
+      }
+    }
+  }
+  PoseFixture fx(60);
+  fx.MoveCamera();
+  for (float& s : fx.sampling.sigma_q) s = 0.0f;
+  for (float& s : fx.sampling.sigma_t) s = 0.0f;
+  const NormalTable table(3000, 5);
+  const BestHypothesis tie = MakeCpuPoseKernel()->Score(fx.sampling, fx.View(), fx.params, table, table.count());
+  EXPECT_EQ(tie.index, 0);
+}
+
 TEST(PoseKernelCpu, PointsBehindTheCameraCostTheCap) {
   PoseFixture fx(3);
   for (float& z : fx.z) z = -3.0f;

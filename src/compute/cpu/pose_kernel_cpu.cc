@@ -1,6 +1,7 @@
 // CPU backend of the pose kernel: hypotheses vectorised across SIMD lanes (the inner loop over the points
 // runs in lock-step, each point's data broadcast), chunks of hypotheses spread over every core (oneTBB).
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 #include <limits>
 
@@ -49,11 +50,36 @@ using cpu::VecF;
 constexpr int kChunk = 256;  // hypotheses per task; a multiple of kLanes
 static_assert(kChunk % kLanes == 0);
 
+// Branch and bound, for a caller that wants only the best hypothesis (PoseKernel::Score without all_scores): the
+// distances are never negative, so a hypothesis' running sum never falls, and one whose sum has passed the score of
+// a hypothesis already scored in full cannot be the lowest; a block of kLanes hypotheses stops once all of its sums
+// have (checked every kPruneEvery points). The bound is the lowest full score any task has found so far, shared
+// between the tasks; which blocks stop early then depends on the threads' timing, but only blocks that cannot hold
+// the winner stop (strictly above the bound), so the winner, its score and the tie to the lowest index are those of
+// the full search. A stopped block's scores are +infinity.
+constexpr int kPruneEvery = 16;
+
+bool AllAbove(const VecF& acc, float bound) {
+  for (int l = 0; l < kLanes; ++l)
+    if (!(acc[l] > bound)) return false;
+  return true;
+}
+
+// bound = min(bound, the first `valid` lanes of acc).
+void LowerBound(std::atomic<float>* bound, const VecF& acc, int valid) {
+  float lowest = std::numeric_limits<float>::infinity();
+  for (int l = 0; l < valid; ++l) lowest = std::min(lowest, acc[l]);  // NaN lanes ignored
+  float current = bound->load(std::memory_order_relaxed);
+  while (lowest < current && !bound->compare_exchange_weak(current, lowest, std::memory_order_relaxed)) {
+  }
+}
+
 // Algorithm 1 and its score, Eq. 6: each hypothesis' capped reprojection distances summed over the scoring
-// points. Scores hypotheses [h0, h0 + n) into out[0 .. n). The table's columns are padded to 16 floats, so the
-// last block may read past `count` into zeros; only n scores are written.
+// points. Scores hypotheses [h0, h0 + n) into out[0 .. n); with a bound, a block that cannot win stops early
+// (above). The table's columns are padded to 16 floats, so the last block may read past `count` into zeros; only n
+// scores are written.
 void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseScoringParams& k,
-                const NormalTable& normals, int h0, int n, float* __restrict out) {
+                const NormalTable& normals, int h0, int n, float* __restrict out, std::atomic<float>* bound) {
   const float* __restrict px = pts.x;
   const float* __restrict py = pts.y;
   const float* __restrict pz = pts.z;
@@ -71,7 +97,18 @@ void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseS
                                  LoadVec(normals.column(6) + h), q, t);
     const ScaledPoseT<VecF> p = MakeScaledPoseT<VecF>(q, t, k.fx, k.fy);
     VecF acc = {};  // zero (not cap * 0, which is NaN for an infinite cap)
-    for (int j = 0; j < np; ++j) acc += ReprojectionDistanceT<SimdMath, VecF, VecF, float>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
+    bool pruned = false;
+    for (int j0 = 0; j0 < np && !pruned; j0 += kPruneEvery) {
+      const int j1 = std::min(np, j0 + kPruneEvery);
+      for (int j = j0; j < j1; ++j)
+        acc += ReprojectionDistanceT<SimdMath, VecF, VecF, float>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
+      if (bound != nullptr && j1 < np) pruned = AllAbove(acc, bound->load(std::memory_order_relaxed));
+    }
+    if (pruned) {
+      for (int l = 0; l < kLanes; ++l) acc[l] = std::numeric_limits<float>::infinity();
+    } else if (bound != nullptr) {
+      LowerBound(bound, acc, n - b < kLanes ? n - b : kLanes);
+    }
     const int valid = n - b < kLanes ? n - b : kLanes;
     if (valid == kLanes) {
       std::memcpy(out + b, &acc, sizeof acc);
@@ -98,6 +135,8 @@ class CpuPoseKernel final : public PoseKernel {
     count = std::min(count, normals.count());
     if (count <= 0) return result;
     const int chunks = (count + kChunk - 1) / kChunk;
+    std::atomic<float> bound(std::numeric_limits<float>::infinity());
+    std::atomic<float>* prune = all_scores ? nullptr : &bound;  // every score wanted: none stopped early
     const Best best = arena_.execute([&] {
       return tbb::parallel_reduce(
           tbb::blocked_range<int>(0, chunks, 4), Best{},
@@ -106,7 +145,7 @@ class CpuPoseKernel final : public PoseKernel {
             for (int c = r.begin(); c < r.end(); ++c) {
               const int h0 = c * kChunk, n = std::min(kChunk, count - h0);
               float* out = all_scores ? all_scores + h0 : local;
-              ScoreChunk(s, pts, k, normals, h0, n, out);
+              ScoreChunk(s, pts, k, normals, h0, n, out, prune);
               for (int i = 0; i < n; ++i) {
                 const Best cand{out[i], h0 + i};
                 if (cand.Beats(b)) b = cand;
