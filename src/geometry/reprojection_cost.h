@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 
+#include "core/camera.h"
 #include "core/pose.h"
 
 namespace mcslam::geometry {
@@ -36,6 +37,18 @@ class FixedCameraReprojectionCost final : public ceres::SizedCostFunction<2, 3> 
   Eigen::Matrix3d R_;
   Eigen::Vector3d t_;
   double u_, v_, f_;
+};
+
+// The self-calibration's residual (geometry/self_calibration.h): a distorted observation uv_px (pixels) of the
+// point X by the camera's pose block as above and the intrinsics block (focal scale s, k1 added to the given
+// camera's): s f * distort(p.xy / p.z) + c - uv_px, the given camera's other terms (k2, k3, p1, p2) held.
+class CalibratedReprojectionCost final : public ceres::SizedCostFunction<2, 7, 3, 2> {
+ public:
+  CalibratedReprojectionCost(const PinholeCamera& camera, const Eigen::Vector2d& uv_px);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  double fx_, fy_, cx_, cy_, k1_, k2_, k3_, p1_, p2_, u_, v_;
 };
 
 }  // namespace mcslam::geometry

@@ -7,8 +7,9 @@
 
 #include <ceres/ceres.h>
 #include <ceres/product_manifold.h>
-#include <ceres/rotation.h>
 #include <fmt/format.h>
+
+#include "geometry/reprojection_cost.h"
 
 namespace mcslam::geometry {
 
@@ -21,32 +22,6 @@ void IntrinsicsOptions::Check() const {
 }
 
 namespace {
-
-// Residual in pixels of a distorted observation, the camera's pose block (qx qy qz qw tx ty tz), the point, and
-// the intrinsics block (focal scale, k1 added to the given one); the given camera's other terms held.
-struct CalibratedReprojection {
-  CalibratedReprojection(const PinholeCamera& c, const Eigen::Vector2d& uv) : cam(c), u(uv.x()), v(uv.y()) {}
-  template <typename T>
-  bool operator()(const T* pose, const T* X, const T* intr, T* r) const {
-    const T q_wxyz[4] = {pose[3], pose[0], pose[1], pose[2]};
-    T p[3];
-    ceres::UnitQuaternionRotatePoint(q_wxyz, X, p);
-    p[0] += pose[4], p[1] += pose[5], p[2] += pose[6];
-    if (!(p[2] > T(1e-9))) return false;
-    const T x = p[0] / p[2], y = p[1] / p[2];
-    const T r2 = x * x + y * y;
-    const Distortion& d = cam.dist;
-    const T k1 = T(d.k1) + intr[1];
-    const T radial = T(1) + r2 * (k1 + r2 * (T(d.k2) + r2 * T(d.k3)));
-    const T xd = x * radial + T(2 * d.p1) * x * y + T(d.p2) * (r2 + T(2) * x * x);
-    const T yd = y * radial + T(d.p1) * (r2 + T(2) * y * y) + T(2 * d.p2) * x * y;
-    r[0] = intr[0] * T(cam.fx) * xd + T(cam.cx) - T(u);
-    r[1] = intr[0] * T(cam.fy) * yd + T(cam.cy) - T(v);
-    return true;
-  }
-  const PinholeCamera& cam;
-  double u, v;
-};
 
 struct Solved {
   double cost = 0;
@@ -71,8 +46,7 @@ Solved Solve(const PinholeCamera& camera, const std::vector<Pose>& cams, const s
   ceres::Problem problem(po);
   std::vector<ceres::ResidualBlockId> ids;
   for (const PixelObservation& o : obs) {
-    auto* cost = new ceres::AutoDiffCostFunction<CalibratedReprojection, 2, 7, 3, 2>(
-        new CalibratedReprojection(camera, o.uv_px));
+    auto* cost = new CalibratedReprojectionCost(camera, o.uv_px);
     ids.push_back(problem.AddResidualBlock(cost, &loss, pose[o.camera].data(), X[o.point].data(), out.intr.data()));
   }
   for (size_t i = 0; i < cams.size(); ++i) {
