@@ -5,6 +5,7 @@ the throughput and the latency.
 
 Usage: timing_table.py RUNS_TSV DOC COMMIT [BASELINE_NAME [CURRENT_NAME [CURRENT_FLAGS [BASELINE_FLAGS]]]]
 (with a CURRENT_NAME, the columns are named after the two names instead of "before" and "now")"""
+import os
 import json
 import shlex
 import statistics
@@ -43,6 +44,17 @@ def main(runs_tsv, doc, commit, baseline_name="", current_name="", current_flags
                 if stage in r["stages_ms"] and r["stages_ms"][stage].get(field) is not None]
         return statistics.median(vals) if vals else None
 
+    def machine():
+        # The CPU the runs were timed on: the figures move with it (the pose kernel's speed with its vector width).
+        try:
+            info = open("/proc/cpuinfo").read()
+        except OSError:
+            return f"{os.cpu_count()} cores"
+        model = next((l.split(":", 1)[1].strip() for l in info.splitlines() if l.startswith("model name")), "unknown CPU")
+        flags = next((l.split(":", 1)[1].split() for l in info.splitlines() if l.startswith("flags")), [])
+        width = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
+        return f"{os.cpu_count()} cores ({model}, {width})"
+
     def title(key):
         name, label = key
         base = NAMES.get(name, name)
@@ -54,7 +66,7 @@ def main(runs_tsv, doc, commit, baseline_name="", current_name="", current_flags
 
     repeats = len(next(iter(reports.values())))
     out = ["# Frame times", "",
-           f"Per-stage time a frame of the whole pipeline, default settings, 2 cores (the development machine), each",
+           f"Per-stage time a frame of the whole pipeline, default settings, {machine()}, each",
            f"sequence run {repeats} times: the median over the runs of each run's median over its frames (a stage's",
            "frames are those where it did work: the pose step from the first tracked frame, remap where requests were",
            "made, adjust on keyframes). The demo is the paper scenario rendered (seed 1, 300 frames); KITTI 06 has 51",
