@@ -45,15 +45,17 @@ def main(runs_tsv, doc, commit, baseline_name="", current_name="", current_flags
         return statistics.median(vals) if vals else None
 
     def machine():
-        # The CPU the runs were timed on: the figures move with it (the pose kernel's speed with its vector width).
+        # The CPU the runs were timed on: the figures move with it (the pose kernel's speed with its vector width,
+        # which is the machine's, the default build being native). The cores this process may use, not the host's.
+        cores = len(os.sched_getaffinity(0))
         try:
             info = open("/proc/cpuinfo").read()
         except OSError:
-            return f"{os.cpu_count()} cores"
+            return f"{cores} cores"
         model = next((l.split(":", 1)[1].strip() for l in info.splitlines() if l.startswith("model name")), "unknown CPU")
         flags = next((l.split(":", 1)[1].split() for l in info.splitlines() if l.startswith("flags")), [])
         width = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
-        return f"{os.cpu_count()} cores ({model}, {width})"
+        return f"{cores} cores ({model}, {width})"
 
     def title(key):
         name, label = key

@@ -97,7 +97,7 @@ TEST(PoseKernelCpu, FindsAShiftedPose) {
 // the bit and the same quaternion as the search that scores every hypothesis in full, on tracking-shaped frames
 // (noise, outliers, the winner a sampled hypothesis) of 17-300 points, counts that are not multiples of the SIMD
 // width or the chunk, one and two threads; and on a table of identical hypotheses (zero spread: every score equal),
-// where only the strict test keeps the tie at the lowest index, 0.
+// where the tie stays at the lowest index, 0 (no block can pass a bound it equals).
 TEST(PoseKernelCpu, StoppingHopelessHypothesesEarlyKeepsTheWinner) {
   for (int points : {17, 120, 300}) {
     for (uint64_t seed : {17, 18, 19}) {

@@ -177,7 +177,11 @@ TEST(BundleAdjust, TheThreeLinearSolversReachTheSameMinimum) {
 // the residual they replaced (UnitQuaternionRotatePoint, then the pinhole projection), at 200 random unit
 // quaternions, translations and points in front of the camera: the same residuals and the same Jacobians to 1e-9 of
 // their largest entry (both evaluate the same polynomials in double precision; measured: a few 1e-16). The
-// fixed-camera cost against the same reference with the pose held. A point behind the camera: no residual.
+// fixed-camera cost against the same reference with the pose held; each block's Jacobian alone when the other is
+// held (no pointer for it) the same as with both. A point behind the camera: no residual.
+// The larger of worst and d, a NaN d taken as the larger (std::max would drop it).
+double Worse(double worst, double d) { return d <= worst ? worst : d; }
+
 struct AutoDiffReference {
   double u, v, f;
   template <typename T>
@@ -219,14 +223,22 @@ TEST(BundleAdjust, TheWrittenOutJacobiansAreTheAutomaticOnes) {
     for (double v : J0_ref) scale = std::max(scale, std::abs(v));
     for (double v : J1_ref) scale = std::max(scale, std::abs(v));
     for (int i = 0; i < 2; ++i) {
-      worst = std::max(worst, std::abs(r[i] - r_ref[i]) / scale);
-      worst_fixed = std::max(worst_fixed, std::abs(r_fixed[i] - r_ref[i]) / scale);
+      worst = Worse(worst, std::abs(r[i] - r_ref[i]) / scale);
+      worst_fixed = Worse(worst_fixed, std::abs(r_fixed[i] - r_ref[i]) / scale);
     }
-    for (int i = 0; i < 14; ++i) worst = std::max(worst, std::abs(J0[i] - J0_ref[i]) / scale);
+    for (int i = 0; i < 14; ++i) worst = Worse(worst, std::abs(J0[i] - J0_ref[i]) / scale);
     for (int i = 0; i < 6; ++i) {
-      worst = std::max(worst, std::abs(J1[i] - J1_ref[i]) / scale);
-      worst_fixed = std::max(worst_fixed, std::abs(J_fixed[i] - J1_ref[i]) / scale);
+      worst = Worse(worst, std::abs(J1[i] - J1_ref[i]) / scale);
+      worst_fixed = Worse(worst_fixed, std::abs(J_fixed[i] - J1_ref[i]) / scale);
     }
+    // One block held (Ceres passes no Jacobian for a constant block): the other's is the same.
+    double J0_only[14], J1_only[6];
+    double* pose_only[2] = {J0_only, nullptr};
+    double* point_only_jac[2] = {nullptr, J1_only};
+    ASSERT_TRUE(ReprojectionCost(uv, f).Evaluate(params, r, pose_only));
+    ASSERT_TRUE(ReprojectionCost(uv, f).Evaluate(params, r, point_only_jac));
+    for (int i = 0; i < 14; ++i) EXPECT_EQ(J0_only[i], J0[i]);
+    for (int i = 0; i < 6; ++i) EXPECT_EQ(J1_only[i], J1[i]);
     // Residuals alone (no Jacobian asked for) are the same values.
     double r_only[2];
     ASSERT_TRUE(ReprojectionCost(uv, f).Evaluate(params, r_only, nullptr));
@@ -248,7 +260,8 @@ TEST(BundleAdjust, TheWrittenOutJacobiansAreTheAutomaticOnes) {
 
 // The self-calibration's written-out residual and Jacobians (pose, point, and the focal scale and k1 increment)
 // against Ceres' automatic differentiation of the residual they replaced, at 200 random poses, points, lenses (k1,
-// k2, k3, p1, p2 all non-zero) and intrinsics blocks: to 1e-9 of the largest entry (measured: a few 1e-16).
+// k2, k3, p1, p2 all non-zero) and intrinsics blocks: to 1e-9 of the largest entry (measured: a few 1e-16); the
+// intrinsics' Jacobian alone (pose and point held) the same.
 struct CalibratedAutoDiffReference {
   PinholeCamera cam;
   double u, v;
@@ -300,9 +313,14 @@ TEST(SelfCalibration, TheWrittenOutJacobiansAreTheAutomaticOnes) {
     double scale = 0;
     for (int b = 0; b < 3; ++b)
       for (int i = 0; i < sizes[b]; ++i) scale = std::max(scale, std::abs(J_ref[b][i]));
-    for (int i = 0; i < 2; ++i) worst = std::max(worst, std::abs(r[i] - r_ref[i]) / scale);
+    for (int i = 0; i < 2; ++i) worst = Worse(worst, std::abs(r[i] - r_ref[i]) / scale);
     for (int b = 0; b < 3; ++b)
-      for (int i = 0; i < sizes[b]; ++i) worst = std::max(worst, std::abs(J[b][i] - J_ref[b][i]) / scale);
+      for (int i = 0; i < sizes[b]; ++i) worst = Worse(worst, std::abs(J[b][i] - J_ref[b][i]) / scale);
+    // The pose and point held (the self-calibration holds its first frames): the intrinsics' Jacobian alone, the same.
+    double J2_only[4];
+    double* intr_only[3] = {nullptr, nullptr, J2_only};
+    ASSERT_TRUE(CalibratedReprojectionCost(cam, uv).Evaluate(params, r, intr_only));
+    for (int i = 0; i < 4; ++i) EXPECT_EQ(J2_only[i], J[2][i]);
   }
   std::printf("[ jacobians ] largest difference from the automatic ones: %.2e of the largest entry\n", worst);
   EXPECT_LT(worst, 1e-9);

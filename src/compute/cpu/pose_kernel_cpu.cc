@@ -2,6 +2,7 @@
 // runs in lock-step, each point's data broadcast), chunks of hypotheses spread over every core (oneTBB).
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 
@@ -59,17 +60,26 @@ static_assert(kChunk % kLanes == 0);
 // the full search. A stopped block's scores are +infinity.
 constexpr int kPruneEvery = 16;
 
-bool AllAbove(const VecF& acc, float bound) {
+// The bound is kept as the bits of a float: every running sum is a float >= 0 (or NaN), and for those the bits
+// order as the values do, with NaN above +infinity; so neither -ffast-math's assumptions about NaN nor a NaN sum can
+// lower the bound or stop a block.
+uint32_t Bits(float x) {
+  uint32_t b;
+  std::memcpy(&b, &x, sizeof b);
+  return b;
+}
+
+bool AllAbove(const VecF& acc, uint32_t bound) {
   for (int l = 0; l < kLanes; ++l)
-    if (!(acc[l] > bound)) return false;
+    if (Bits(acc[l]) <= bound) return false;
   return true;
 }
 
 // bound = min(bound, the first `valid` lanes of acc).
-void LowerBound(std::atomic<float>* bound, const VecF& acc, int valid) {
-  float lowest = std::numeric_limits<float>::infinity();
-  for (int l = 0; l < valid; ++l) lowest = std::min(lowest, acc[l]);  // NaN lanes ignored
-  float current = bound->load(std::memory_order_relaxed);
+void LowerBound(std::atomic<uint32_t>* bound, const VecF& acc, int valid) {
+  uint32_t lowest = Bits(std::numeric_limits<float>::infinity());
+  for (int l = 0; l < valid; ++l) lowest = std::min(lowest, Bits(acc[l]));
+  uint32_t current = bound->load(std::memory_order_relaxed);
   while (lowest < current && !bound->compare_exchange_weak(current, lowest, std::memory_order_relaxed)) {
   }
 }
@@ -79,7 +89,7 @@ void LowerBound(std::atomic<float>* bound, const VecF& acc, int valid) {
 // (above). The table's columns are padded to 16 floats, so the last block may read past `count` into zeros; only n
 // scores are written.
 void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseScoringParams& k,
-                const NormalTable& normals, int h0, int n, float* __restrict out, std::atomic<float>* bound) {
+                const NormalTable& normals, int h0, int n, float* __restrict out, std::atomic<uint32_t>* bound) {
   const float* __restrict px = pts.x;
   const float* __restrict py = pts.y;
   const float* __restrict pz = pts.z;
@@ -135,8 +145,8 @@ class CpuPoseKernel final : public PoseKernel {
     count = std::min(count, normals.count());
     if (count <= 0) return result;
     const int chunks = (count + kChunk - 1) / kChunk;
-    std::atomic<float> bound(std::numeric_limits<float>::infinity());
-    std::atomic<float>* prune = all_scores ? nullptr : &bound;  // every score wanted: none stopped early
+    std::atomic<uint32_t> bound(Bits(std::numeric_limits<float>::infinity()));
+    std::atomic<uint32_t>* prune = all_scores ? nullptr : &bound;  // every score wanted: none stopped early
     const Best best = arena_.execute([&] {
       return tbb::parallel_reduce(
           tbb::blocked_range<int>(0, chunks, 4), Best{},
