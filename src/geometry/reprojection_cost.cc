@@ -116,11 +116,10 @@ bool CalibratedReprojectionCost::Evaluate(double const* const* parameters, doubl
   if (jacobians[0] != nullptr || jacobians[1] != nullptr) {
     // d(xd, yd) / d(x, y), then d(x, y) / dp.
     const double d_radial = k1 + r2 * (2.0 * k2_ + 3.0 * k3_ * r2);  // d radial / d r2
+    const double cross = 2.0 * x * y * d_radial + 2.0 * p1_ * x + 2.0 * p2_ * y;  // d xd / dy = d yd / dx
     Eigen::Matrix2d d_xy;
-    d_xy << radial + 2.0 * x * x * d_radial + 2.0 * p1_ * y + 6.0 * p2_ * x,
-        2.0 * x * y * d_radial + 2.0 * p1_ * x + 2.0 * p2_ * y,
-        2.0 * x * y * d_radial + 2.0 * p1_ * x + 2.0 * p2_ * y,
-        radial + 2.0 * y * y * d_radial + 6.0 * p1_ * y + 2.0 * p2_ * x;
+    d_xy << radial + 2.0 * x * x * d_radial + 2.0 * p1_ * y + 6.0 * p2_ * x, cross,
+        cross, radial + 2.0 * y * y * d_radial + 6.0 * p1_ * y + 2.0 * p2_ * x;
     Eigen::Matrix<double, 2, 3> d_proj;
     d_proj << iz, 0, -x * iz, 0, iz, -y * iz;
     const Eigen::Matrix<double, 2, 3> d_p = Eigen::Vector2d(sfx, sfy).asDiagonal() * (d_xy * d_proj);

@@ -114,12 +114,12 @@ void ScoreChunk(const PoseSampling& s, const PoseScoringPoints& pts, const PoseS
         acc += ReprojectionDistanceT<SimdMath, VecF, VecF, float>(p, px[j], py[j], pz[j], pu[j], pv[j], k, cap);
       if (bound != nullptr && j1 < np) pruned = AllAbove(acc, bound->load(std::memory_order_relaxed));
     }
+    const int valid = n - b < kLanes ? n - b : kLanes;
     if (pruned) {
       for (int l = 0; l < kLanes; ++l) acc[l] = std::numeric_limits<float>::infinity();
     } else if (bound != nullptr) {
-      LowerBound(bound, acc, n - b < kLanes ? n - b : kLanes);
+      LowerBound(bound, acc, valid);
     }
-    const int valid = n - b < kLanes ? n - b : kLanes;
     if (valid == kLanes) {
       std::memcpy(out + b, &acc, sizeof acc);
     } else {
