@@ -240,7 +240,7 @@ void ImageRun::WriteReport() {
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_adjust_points, be_local_ba, be_local_ba_wait, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
-          remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0;
+          remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0, described_for_remap = 0;
   double features_sum = 0;
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
@@ -259,7 +259,7 @@ void ImageRun::WriteReport() {
     remap_outside += row.fe.remap_outside, remap_no_candidate += row.fe.remap_no_candidate;
     remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
     remap_refused += row.fe.remap_refused_id, remap_deferred += row.fe.remap_deferred;
-    refreshed += row.fe.refreshed;
+    refreshed += row.fe.refreshed, described_for_remap += row.fe.described_for_remap;
     be_total.Add(row.backend_ms);
     // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
     // initialisation then replaces; the wall time of Process before the map exists is that time, all of it.
@@ -345,7 +345,8 @@ void ImageRun::WriteReport() {
                    {"remap_no_match", remap_no_match},
                    {"remap_over_budget", remap_over_budget},
                    {"remap_deferred", remap_deferred},
-                   {"descriptors_refreshed", refreshed}};
+                   {"descriptors_refreshed", refreshed},
+                   {"new_tracks_described_for_remap", described_for_remap}};
   {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
     // pose step succeeded from it.

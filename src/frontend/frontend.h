@@ -204,6 +204,7 @@ struct FrameStats {
   int detected = 0;               // new tracks born in this frame
   int remap_requests = 0;
   int remapped = 0;
+  int described_for_remap = 0;  // new tracks that took the descriptor a remapping window gave their corner
   int refreshed = 0;           // tracks described again (FrontendOptions::descriptor_refresh_frames)
   int remap_refused_id = 0;    // the id is tracked now, repeated, or was never issued here
   int remap_outside = 0;       // projection outside the image

@@ -161,9 +161,11 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   // Remapping (§6.4): the strongest new corners in the window around each projection, matched by SIFT.
   const auto t_remap = Clock::now();
   std::vector<std::pair<const RemapRequest*, size_t>> attached;  // request, candidate
+  // The candidates described for the remapping, by index: a new track started at one of them takes that
+  // descriptor instead of being described again (the same values: SiftDescriber::DescribeAll).
+  std::unordered_map<size_t, std::optional<Descriptor>> descriptors;
   if (!requests.empty()) {
     std::vector<std::vector<size_t>> window_candidates(requests.size());
-    std::unordered_map<size_t, std::optional<Descriptor>> descriptors;
     const float hw = static_cast<float>(o.remap_window_px);
     for (size_t r = 0; r < requests.size(); ++r) {
       const float u = static_cast<float>(requests[r]->uv_px.x()), v = static_cast<float>(requests[r]->uv_px.y());
@@ -267,7 +269,12 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     const auto [vel, sigma] = InitialVelocity(t.uv, n_carried);
     t.kf = ConstantVelocityKalman(ToEigen(t.uv), vel, o.kalman_measurement_sigma_px, sigma);
     if (o.anchor_every > 0) t.anchor = MonitorPatch(gray, t.uv, o);
-    to_describe.push_back(tracks.size());
+    if (const auto d = descriptors.find(k); d != descriptors.end() && d->second) {
+      t.descriptor = d->second;  // described_at_age: 0, its age now
+      ++st.described_for_remap;
+    } else {
+      to_describe.push_back(tracks.size());
+    }
     tracks.push_back(std::move(t));
     ++st.detected;
   }

@@ -95,6 +95,36 @@ TEST(Frontend, RemapRefusesAWrongDescriptor) {
   EXPECT_EQ(r3.stats.remap_no_match, 1);
 }
 
+// A new track born at a corner that a remapping window had described takes that descriptor instead of being
+// described again: the same descriptors as a front end that was asked for no remapping, and fewer descriptions.
+TEST(Frontend, ANewTrackKeepsTheDescriptorItsRemappingWindowGaveIt) {
+  for (const bool async : {false, true}) {
+    FrontendOptions o;
+    o.describe_async = async;
+    RemapScene with_scene, without_scene;
+    // An occluder wide enough to empty A's detection cell: frame 3 starts new tracks there, in A's window.
+    with_scene.occluder_half_px = without_scene.occluder_half_px = 40;
+    Frontend with(o), without(o);
+    ASSERT_NO_FATAL_FAILURE(with_scene.Run(with));
+    ASSERT_NO_FATAL_FAILURE(without_scene.Run(without));
+    // Another feature's look: the window's corners are described and none matches, so they all become new tracks.
+    const RemapRequest req{with_scene.a_id, with_scene.b_desc, with_scene.a_at_frame3};
+    const FrameResult r = with.Process(with_scene.Frame3(), 3, 0.3, std::span<const RemapRequest>(&req, 1));
+    const FrameResult q = without.Process(without_scene.Frame3(), 3, 0.3);
+    EXPECT_TRUE(r.remapped_ids.empty());
+    EXPECT_GT(r.stats.described_for_remap, 0) << "async " << async << ", new tracks " << r.stats.detected;
+    EXPECT_EQ(q.stats.described_for_remap, 0);
+    ASSERT_EQ(r.features.size(), q.features.size());
+    for (size_t i = 0; i < r.features.size(); ++i) {
+      ASSERT_EQ(r.features[i].feature_id, q.features[i].feature_id);
+      EXPECT_EQ(r.features[i].uv_px, q.features[i].uv_px);
+      const auto dr = with.GetDescriptor(r.features[i].feature_id), dq = without.GetDescriptor(q.features[i].feature_id);
+      ASSERT_TRUE(dr && dq) << "id " << r.features[i].feature_id << " async " << async;
+      EXPECT_EQ(*dr, *dq) << "id " << r.features[i].feature_id << " async " << async;
+    }
+  }
+}
+
 // A point whose last look no longer matches (here: another feature's) is still re-attached by the look it had
 // when its track began, when the caller gives that too (RemapRequest::first_look); with neither matching, none.
 TEST(Frontend, RemapMatchesTheFirstLookWhereTheLastOneFails) {
