@@ -15,7 +15,7 @@ OUT=${2:-out/robustness}
 SEEDS=${3:-10}
 DATA=${4:-${MCSLAM_DATA:-../shared/data}}
 DOC=${5:-docs/robustness.md}
-SCENARIOS=${SCENARIOS:-"paper forward rotation planar fast still-start sparse"}
+SCENARIOS=${SCENARIOS:-"paper forward rotation planar fast still-start stop-and-go sparse"}
 read -r -a SYNTH_EXTRA <<< "${SYNTH_FLAGS:-}"
 read -r -a RUN_EXTRA <<< "${RUN_FLAGS:-}"
 mkdir -p "$OUT"

@@ -16,7 +16,7 @@ import subprocess
 import sys
 import tempfile
 
-SCENARIOS = ["paper", "forward", "rotation", "planar", "fast", "still-start", "sparse"]
+SCENARIOS = ["paper", "forward", "rotation", "planar", "fast", "still-start", "stop-and-go", "sparse"]
 
 
 def read_observations(path):

@@ -12,7 +12,7 @@ OUT=${2:-out/track_quality}
 SEEDS=${3:-5}
 DATA=${4:-${MCSLAM_DATA:-../shared/data}}
 DOC=${5:-docs/track_quality.md}
-SCENARIOS=${SCENARIOS:-"paper forward rotation planar fast still-start sparse"}
+SCENARIOS=${SCENARIOS:-"paper forward rotation planar fast still-start stop-and-go sparse"}
 HERE=$(dirname "$0")
 mkdir -p "$OUT"
 rows="$OUT/rows.tsv"

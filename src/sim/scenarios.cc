@@ -311,12 +311,29 @@ Path StillStartPath(uint64_t seed, double speed) {
   return [paper, warp, speed](double t) { return paper(speed * warp(t)); };
 }
 
+Path StopAndGoPath(uint64_t seed, double speed) {
+  // The paper's motion, brought to a full stop twice (a hand that pauses, a car at a light): the path slows to
+  // nothing over kStopRampS, stays exactly still for kStopS, and speeds up again over kStopRampS.
+  std::vector<std::pair<double, double>> knots = {{0.0, 1.0}};
+  for (const double start : kStopAndGoStopsS) {
+    knots.push_back({start, 1.0});
+    knots.push_back({start + kStopRampS, 0.0});
+    knots.push_back({start + kStopRampS + kStopS, 0.0});
+    knots.push_back({start + 2 * kStopRampS + kStopS, 1.0});
+  }
+  const TimeWarp warp(knots);
+  const PaperPathFunction paper = MakePaperPath(seed);
+  // The stops are in the camera's time, whatever the speed: the warp is applied before the speed scales the path.
+  return [paper, warp, speed](double t) { return paper(speed * warp(t)); };
+}
+
 Path ScenarioPath(const std::string& name, uint64_t seed, double speed) {
   if (name == "forward") return ForwardPath(seed, speed);
   if (name == "rotation") return RotationPath(seed, speed);
   if (name == "planar") return PlanarPath(seed, speed);
   if (name == "fast") return PaperPathAt(seed, kFastSpeedFactor * speed);
   if (name == "still-start") return StillStartPath(seed, speed);
+  if (name == "stop-and-go") return StopAndGoPath(seed, speed);
   return PaperPathAt(seed, speed);  // paper, sparse
 }
 
@@ -324,7 +341,7 @@ Path ScenarioPath(const std::string& name, uint64_t seed, double speed) {
 
 const std::vector<std::string>& ScenarioNames() {
   static const std::vector<std::string> kNames = {"paper", "forward", "rotation", "planar",
-                                                  "fast",  "still-start", "sparse"};
+                                                  "fast",  "still-start", "stop-and-go", "sparse"};
   return kNames;
 }
 
@@ -333,7 +350,7 @@ ScenarioInfo DescribeScenario(const std::string& name) {
   info.name = name;
   info.camera = PaperCamera();
   info.max_path_s = kInfinity;
-  if (name == "paper" || name == "still-start") {
+  if (name == "paper" || name == "still-start" || name == "stop-and-go") {
   } else if (name == "forward") {
     info.camera = ForwardCamera();
     info.fps = 10;
@@ -363,7 +380,7 @@ Scene ScenarioScene(const std::string& name, uint64_t seed) {
   if (name == "rotation") return RoomScene();
   if (name == "planar") return PosterScene();
   if (name == "sparse") return SmoothPaperScene();
-  return PaperScene();  // paper, fast, still-start
+  return PaperScene();  // paper, fast, still-start, stop-and-go
 }
 
 int ScenarioOptions::MaxFrames() const {

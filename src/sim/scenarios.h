@@ -13,6 +13,7 @@
 //                every point on one plane
 //   fast         the paper's path at kFastSpeedFactor times its speed (large inter-frame displacement)
 //   still-start  the camera exactly still for kStillStartS seconds, then the paper's motion
+//   stop-and-go  the paper's motion, brought to a full stop twice mid-run (kStopAndGoStopsS), still for kStopS
 //   sparse       the paper's box and floor with smooth, low-contrast textures and a few blobs; 70 points
 //
 // Every path is a function of time; the seed makes the path's phases, the world's layout (forward: the
@@ -37,6 +38,12 @@ const std::vector<std::string>& ScenarioNames();
 inline constexpr double kFastSpeedFactor = 15.0;
 // The still-start scenario's camera does not move during its first kStillStartS seconds (whatever the speed).
 inline constexpr double kStillStartS = 2.0;
+// The stop-and-go scenario's stops: each begins to slow down at one of these times (seconds of the camera's
+// clock), reaches a standstill kStopRampS later, stays exactly still for kStopS and is back to speed kStopRampS
+// after that.
+inline constexpr double kStopAndGoStopsS[2] = {3.0, 6.5};
+inline constexpr double kStopS = 1.5;
+inline constexpr double kStopRampS = 0.4;
 // The rotation scenario's pure-rotation segments, in path seconds (speed * time): the camera centre is fixed.
 inline constexpr std::pair<double, double> kRotationPureSegmentsS[2] = {{3.2, 4.0}, {5.8, 6.8}};
 // ... and its opening: panning in place (the centre drifts about 1 cm in all) until this path time.

@@ -148,7 +148,7 @@ TEST(CliSynth, EveryScenarioWritesItsDefaultsAndOneSummaryLine) {
     int frames;
     int width;
   } kScenarios[] = {{"paper", 300, 320},  {"forward", 120, 620},     {"rotation", 270, 320}, {"planar", 300, 320},
-                    {"fast", 150, 320}, {"still-start", 300, 320}, {"sparse", 300, 320}};
+                    {"fast", 150, 320}, {"still-start", 300, 320}, {"stop-and-go", 300, 320}, {"sparse", 300, 320}};
   for (const auto& s : kScenarios) {
     TempDir tmp;
     const std::string out = tmp / "seq";

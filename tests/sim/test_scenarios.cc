@@ -188,6 +188,25 @@ TEST(Scenarios, StillStartIsStillThenMoves) {
   EXPECT_GT((Center(seq.cam_from_world[k + 1]) - Center(seq.cam_from_world[k])).norm(), 0.005);
 }
 
+TEST(Scenarios, StopAndGoStandsExactlyStillTwiceAndMovesBetween) {
+  const SyntheticSequence seq = Make("stop-and-go");
+  const auto frame_at = [&](double t) { return static_cast<size_t>(std::ceil(t * seq.fps - 1e-9)); };
+  size_t still_pairs = 0;
+  for (const double start : kStopAndGoStopsS) {
+    const size_t first = frame_at(start + kStopRampS), last = frame_at(start + kStopRampS + kStopS) - 1;
+    ASSERT_LT(last, seq.cam_from_world.size());
+    for (size_t i = first + 1; i <= last; ++i, ++still_pairs) {
+      EXPECT_EQ(seq.cam_from_world[i].t, seq.cam_from_world[first].t) << i;
+      EXPECT_EQ(seq.cam_from_world[i].q.coeffs(), seq.cam_from_world[first].q.coeffs()) << i;
+    }
+    // Before the stop and a second after it, it moves like the paper's camera (centimetres a frame).
+    for (const size_t k : {frame_at(start) - 2, frame_at(start + 2 * kStopRampS + kStopS + 1.0)})
+      EXPECT_GT((Center(seq.cam_from_world[k + 1]) - Center(seq.cam_from_world[k])).norm(), 0.005) << k;
+  }
+  // Two stops of 1.5 s at 30 frames a second: 44 frames the same as the one before them, at least.
+  EXPECT_GE(still_pairs, 2 * static_cast<size_t>(kStopS * seq.fps) - 2);
+}
+
 TEST(Scenarios, PlanarPointsAreOnOnePlane) {
   const SyntheticSequence seq = Make("planar");
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
