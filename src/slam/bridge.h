@@ -63,8 +63,9 @@ class Bridge {
 
  private:
   // After the scaling of a join: the bridge's keyframes (and the joining frame) and its points adjusted together,
-  // the anchor and the map's points fixed. Returns how many keyframes were adjusted (0: too few points).
-  int AdjustJoined(int slot, FrameReport* r);
+  // the anchor and the map's points fixed. slot_in_bridge: the joining frame's pose in the scaled provisional map
+  // (r says whether it was posed by a turn). Returns how many keyframes were adjusted (0: too few points).
+  int AdjustJoined(int slot, const Pose& slot_in_bridge, FrameReport* r);
 
   SlamState& s_;
   const Initializer& init_;

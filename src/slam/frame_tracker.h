@@ -62,6 +62,9 @@ class FrameTracker {
   double panorama_min_rms_px_ = 0;  // the least residual of its frames so far: the tracks' noise
   std::vector<std::pair<int, double>> panorama_rms_px_;  // each of its frames (slot) and its residual, in order
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
+  // The frame of the turn under way whose residual jumped past the move test's bound, lost but the turn kept for
+  // the next frame to tell a move from noise (-1: none).
+  int jump_slot_ = -1;
 };
 
 }  // namespace mcslam::slam

@@ -249,6 +249,12 @@ struct SystemOptions {
   // triangulated from that phantom baseline sent the frames after it 3-5 deg and up to 27 cm off (ATE 3.5 cm;
   // with the turn 0.6 cm).
   bool rotation_only_over_weak_pose = true;
+  // A turn under way whose residual jumps past the move test's bound on one frame is kept for the next frame to
+  // tell a move (it grows) from noise (it falls back): that frame is lost, the turn and a provisional map being
+  // tracked are kept, and the next frame turns on about the same centre or ends the turn. Through noisy images
+  // single frames of a pure turn jump so (rotation scenario with noise of 6 grey levels: 0.46 px against 0.32,
+  // the turn ended, 80 frames lost after it; docs/rotation_only.md). false: the first such frame ends the turn.
+  bool rotation_only_keep_turn_over_a_jump = true;
   // A bridge over the unmapped: when a turn that took the map out of view ends in a move (the rotation-only
   // tracking above refuses the frame), the camera goes on where nothing is mapped and would stay lost until the
   // map comes back into view. A provisional map is made instead from two views, as the initialisation makes the

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -120,8 +121,10 @@ GapRun RunOverAGap(const std::string& scenario, const std::string& out, const st
 
 // Renders the rotation scenario of `seed` into dir/s and runs it with default settings (and `extra`) into dir/r;
 // the run's result (its exit code asserted by the caller).
-testing::CommandResult RunRenderedRotation(const TempDir& dir, int seed, const std::string& extra = "") {
-  const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed {} --render --out {}", seed, dir / "s"));
+testing::CommandResult RunRenderedRotation(const TempDir& dir, int seed, const std::string& extra = "",
+                                           const std::string& synth_extra = "") {
+  const auto s =
+      RunMcslam(fmt::format("synth --scenario rotation --seed {} --render {} --out {}", seed, synth_extra, dir / "s"));
   EXPECT_EQ(s.exit_code, 0) << s.output;
   return RunMcslam(fmt::format("run {} --dataset synthetic --seed {} {} --out {}", dir / "s", seed, extra, dir / "r"));
 }
@@ -163,6 +166,62 @@ TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
     const std::vector<std::string> guessed = testing::CsvColumn(dir / "r/frames.csv", "guessed_scale");
     EXPECT_EQ(std::count(guessed.begin(), guessed.end(), "1"), 0) << "seed " << seed;
   }
+}
+
+// A join that comes while the camera is still turning back to the map: the joining frame sees none of the provisional
+// map's points, only the map's few that relocalised it, and nothing but the anchor held the provisional map's far
+// end, so it was joined scaled but not adjusted. Now the turn ties it: the joining frame turned about the centre of
+// the keyframe the turn started from, so its observations of the map, turned back, are that keyframe's, and the
+// bridge is adjusted between the anchor and it. The rotation scenario rendered with noise of 6 grey levels, seeds
+// 1-10 (docs/rotation_only.md): seven joins, all in a turn; ATE seed 2 22.1 -> 3.1 cm, seed 1 4.3 -> 2.5, seed 9
+// 4.6 -> 2.5, seed 7 1.3 -> 1.8, the rest within 0.3 cm; 8 of 10 meet the matrix's 1 % of the path (3.3 cm) against
+// 5. Bounds for seeds 2 and 9: the join was made in a turn and adjusted more than 20 keyframes (measured 65 and
+// 73), and ATE under 6.5 cm (2 % of the path: twice the matrix's rule; measured 3.1 and 2.5 cm, and 22.1 and 4.6
+// cm without the adjustment, where seed 9 passes: the join's note is what fails there).
+TEST(CliRun, AJoinMadeInATurnAdjustsTheProvisionalMapThroughTheTurn) {
+  for (const int seed : {2, 9}) {
+    TempDir dir;
+    const auto r = RunRenderedRotation(dir, seed, "", "--image-noise 6");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_LT(Field(r.output, "ate_rmse"), 0.065) << "seed " << seed << ": " << r.output;
+    int joined_in_turn = 0, adjusted = 0;
+    for (const std::string& note : testing::CsvColumn(dir / "r/frames.csv", "note")) {
+      if (note.find("the provisional map joins it") == std::string::npos) continue;
+      joined_in_turn += note.find("rotation only") != std::string::npos;
+      if (const size_t at = note.find(" of its keyframes adjusted"); at != std::string::npos) {
+        const size_t from = note.rfind(' ', at - 1) + 1;
+        adjusted = std::max(adjusted, std::stoi(note.substr(from, at - from)));
+      }
+    }
+    EXPECT_EQ(joined_in_turn, 1) << "seed " << seed;
+    EXPECT_GT(adjusted, 20) << "seed " << seed;
+  }
+}
+
+// One frame of a turn whose residual jumps is not yet a move. The rotation scenario rendered with noise of 6 grey
+// levels, seed 3: the turn of frames 110-120 (the camera's centre fixed) was ended at frame 111 on 0.46 px against
+// 0.32, a provisional map anchored at 110 saw only the turn (a homography explained every track) until the turn had
+// swept most of its tracks out of view, and frames 111-190 were lost (186 of 270 tracked). Now frame 111 is lost
+// alone and frame 112 turns on about the same centre (0.32 px). Measured 265 of 270 tracked, ATE 0.69 cm (the 186
+// frames before: 0.54 cm); seeds 12 and 15 of the same renders 261 -> 268 tracked and 14.1 -> 1.4 cm, 186 -> 267
+// tracked (docs/rotation_only.md). Bounds: at least 255 frames tracked (186 before; the turn's 5 worst frames
+// and a margin of as many again), the jump said in the notes and the frame after it turned, ATE under 2 cm (3x
+// the 0.69 measured, and under the scenario's 1 %-of-path rule: the path is 3.3 m).
+TEST(CliRun, OneFrameWhoseResidualJumpsDoesNotEndATurn) {
+  TempDir dir;
+  const auto r = RunRenderedRotation(dir, 3, "", "--image-noise 6");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_GE(Field(r.output, "tracked"), 255) << r.output;
+  EXPECT_LT(Field(r.output, "ate_rmse"), 0.02) << r.output;
+  const std::vector<std::string> note = testing::CsvColumn(dir / "r/frames.csv", "note");
+  int jumps = 0, turned_after = 0;
+  for (size_t i = 0; i + 1 < note.size(); ++i)
+    if (note[i].find("residual jumped") != std::string::npos) {
+      ++jumps;
+      turned_after += note[i + 1].find("rotation only") != std::string::npos;
+    }
+  EXPECT_GE(jumps, 1);
+  EXPECT_GE(turned_after, 1);
 }
 
 // A provisional map that never joins the map (the run ends first, here; or it is lost) leaves its frames at the
@@ -233,7 +292,14 @@ TEST(CliRun, ATurnOverAWeakPoseAfterARelocalisationFitsItsPoints) {
   TempDir dir;
   const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed 6 --image-noise 6 --render --out {}", dir / "s"));
   ASSERT_EQ(s.exit_code, 0) << s.output;
-  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed 6 --end 205 --out {}", dir / "s", dir / "r"));
+  // The case arises where a jump of the turn's residual at frame 195 (0.32 px against 0.25) ends the turn, as every
+  // jump did before SystemOptions::rotation_only_keep_turn_over_a_jump: with it kept, the map is found again at
+  // frame 196 and no weak pose follows. The turn's centre after a relocalisation is what is tested here, so the
+  // run ends turns as then.
+  const std::string options = dir / "options.json";
+  std::ofstream(options) << R"({"options": {"system": {"rotation_only_keep_turn_over_a_jump": false}}})";
+  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed 6 --end 205 --options-from {} --out {}",
+                                       dir / "s", options, dir / "r"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string csv = dir / "r/frames.csv";
   const std::vector<std::string> notes = testing::CsvColumn(csv, "note"), inliers = testing::CsvColumn(csv, "inliers"),
