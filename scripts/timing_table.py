@@ -11,6 +11,8 @@ import shlex
 import statistics
 import sys
 from collections import OrderedDict
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import machine_info  # noqa: E402
 
 NAMES = {"demo": "demo 320x240", "kitti06": "KITTI 06 1241x376", "7scenes": "7-Scenes 640x480"}
 STAGES = [("frame_total", "frame (latency)"), ("decode", "read"), ("frontend_total", "front end"),
@@ -47,15 +49,7 @@ def main(runs_tsv, doc, commit, baseline_name="", current_name="", current_flags
     def machine():
         # The CPU the runs were timed on: the figures move with it (the pose kernel's speed with its vector width,
         # which is the machine's, the default build being native). The cores this process may use, not the host's.
-        cores = len(os.sched_getaffinity(0))
-        try:
-            info = open("/proc/cpuinfo").read()
-        except OSError:
-            return f"{cores} cores"
-        model = next((l.split(":", 1)[1].strip() for l in info.splitlines() if l.startswith("model name")), "unknown CPU")
-        flags = next((l.split(":", 1)[1].split() for l in info.splitlines() if l.startswith("flags")), [])
-        width = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
-        return f"{cores} cores ({model}, {width})"
+        return machine_info.describe()
 
     def title(key):
         name, label = key
