@@ -168,6 +168,13 @@ std::vector<FrameReport> Bridge::Try(int slot) {
 
 std::vector<FrameReport> Bridge::Join(int slot, const Pose& cam_from_world) {
   FrameReport r = tracker_.TrackFrame(slot, std::nullopt);  // in the provisional map
+  // A frame the provisional map did not pose cannot join it. FrameTracker keeps the provisional map (and the turn)
+  // over a frame whose turn residual jumped, for the next frame to tell; here the map is found instead, and the
+  // provisional map is given up as for any frame it loses, the turn with it (its centre is a provisional frame's).
+  if (active() && !s_.map.frames[slot].has_pose) {
+    Abandon(s_.map.frames[slot].index);
+    tracker_.EndTurn();
+  }
   if (!active()) {  // its tracking failed: the map's pose stands (and no new bridge is needed, the map is found)
     state_.reset();
     std::vector<FrameReport> out{tracker_.TrackFrame(slot, cam_from_world)};
