@@ -272,8 +272,8 @@ int Bridge::AdjustJoined(int slot, const Pose& slot_in_bridge, FrameReport* r) {
   std::sort(keyframes.begin(), keyframes.end());
   keyframes.erase(std::unique(keyframes.begin(), keyframes.end()), keyframes.end());
   if (keyframes.empty() || keyframes.front() != a) return 0;
-  // The window's frames and poses; its last frame is the joining frame (free, placed by the map's points), or in
-  // the turn case below the turn's centre keyframe (held where the join places it).
+  // The window's frames and poses; its last frame is the joining frame (placed by the map's points), or in the turn
+  // case below the turn's centre keyframe (placed by its own points and the map's seen through the turn).
   std::vector<int> window;
   std::vector<Pose> cams, before;
   std::vector<bool> fixed;
@@ -281,6 +281,8 @@ int Bridge::AdjustJoined(int slot, const Pose& slot_in_bridge, FrameReport* r) {
   std::vector<bool> fixed_points;
   std::vector<int> seen;
   int last_sees_bridge = 0;
+  // A point the adjustment holds: the map's (or a loaded map's), not the bridge's own.
+  const auto held = [&](int64_t id) { return !state_->points.count(id) || s_.IsLoaded(id); };
   // Its points seen twice or more, and every point of the map any of its frames sees (held fixed, one view
   // places a frame: the joining frame sees the map's points only once).
   // turned_from_last: in the turn case, the rotation from the window's last frame to the joining frame, whose
@@ -302,16 +304,16 @@ int Bridge::AdjustJoined(int slot, const Pose& slot_in_bridge, FrameReport* r) {
       for (const FeatureUndistorted& f : s_.map.frames[window[w]].features) {
         MapPoint* p = s_.map.Find(f.id);
         if (!p || p->state == PointState::kRemoved) continue;
-        const bool held = !state_->points.count(f.id) || s_.IsLoaded(f.id);
-        if (!held && count[f.id] < 2) continue;
+        const bool is_held = held(f.id);
+        if (!is_held && count[f.id] < 2) continue;
         auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
-        if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world), fixed_points.push_back(held);
+        if (fresh) wp.pts.push_back(p), wp.X.push_back(p->position_in_world), fixed_points.push_back(is_held);
         wp.obs.push_back({static_cast<int>(w), it->second, s_.ideal.PixelToNormalized(f.uv_px)});
       }
     if (turned_from_last)
       for (const FeatureUndistorted& f : s_.map.frames[slot].features) {
         MapPoint* p = s_.map.Find(f.id);
-        if (!p || p->state == PointState::kRemoved || (state_->points.count(f.id) && !s_.IsLoaded(f.id))) continue;
+        if (!p || p->state == PointState::kRemoved || !held(f.id)) continue;
         const Eigen::Vector3d ray = turned_from_last->conjugate() * s_.ideal.PixelToNormalized(f.uv_px).homogeneous();
         if (!(ray.z() > 0)) continue;
         auto [it, fresh] = index.try_emplace(f.id, static_cast<int>(wp.pts.size()));
@@ -353,7 +355,7 @@ int Bridge::AdjustJoined(int slot, const Pose& slot_in_bridge, FrameReport* r) {
         break;
       }
   }
-  if (seen.size() < 2 || *std::min_element(seen.begin() + 1, seen.end()) < s_.options.tracker.min_inliers ||
+  if (*std::min_element(seen.begin() + 1, seen.end()) < s_.options.tracker.min_inliers ||
       (!through_turn && last_sees_bridge < 1))
     return 0;
   // Through a turn the joining frame follows the centre keyframe's correction from the pose the turn gave it in the
