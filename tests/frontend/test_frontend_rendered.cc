@@ -144,27 +144,41 @@ std::vector<FrameResult> RunWithChange(const FrontendOptions& options, int from,
   return out;
 }
 
+// One exposure step by `factor` at frame 30 of the paper scene, with and without its compensation: the step
+// frame's tracks before it, those lost either way, and the gain each measured.
+struct ExposureStep {
+  int before = 0, lost_with = 0, lost_without = 0;
+  float gain_with = 1, gain_without = 1;
+};
+ExposureStep RunExposureStep(double factor) {
+  const auto scaled = [factor](int, cv::Mat& img) { img.convertTo(img, -1, factor); };
+  FrontendOptions off;
+  off.exposure_min_change = 0;
+  const std::vector<FrameResult> with = RunWithChange(FrontendOptions{}, 30, 31, scaled);
+  const std::vector<FrameResult> without = RunWithChange(off, 30, 31, scaled);
+  ExposureStep e;
+  e.lost_with = static_cast<int>(with[0].lost.size());
+  e.lost_without = static_cast<int>(without[0].lost.size());
+  e.before = with[0].stats.tracked + e.lost_with;
+  e.gain_with = with[0].stats.exposure_gain;
+  e.gain_without = without[0].stats.exposure_gain;
+  std::printf("exposure %.1fx: %d tracks before; lost %d with compensation (gain %.3f), %d without\n", factor,
+              e.before, e.lost_with, e.gain_with, e.lost_without);
+  return e;
+}
+
 // An auto exposure that jumps (0.6x here) scales every intensity: Lucas-Kanade matches intensities as they are and
 // loses tracks, unless the previous frame is first brought to the new exposure (FrontendOptions::
 // exposure_min_change). Measured on this scene: with it 3 of 76 tracks lost and the gain measured 0.608; without it
 // 48 lost. Bounds: at most 10 % lost with it, at least 25 % without; the gain within 0.02 (the 8-bit rounding of
 // the darker frame and the texture clipped at black move the windows' mean ratio by ~1 %).
 TEST(FrontendRendered, AnExposureStepKeepsTheTracks) {
-  const auto darker = [](int, cv::Mat& img) { img.convertTo(img, -1, 0.6); };
-  FrontendOptions off;
-  off.exposure_min_change = 0;
-  const std::vector<FrameResult> with = RunWithChange(FrontendOptions{}, 30, 31, darker);
-  const std::vector<FrameResult> without = RunWithChange(off, 30, 31, darker);
-  const FrameStats &a = with[0].stats, &b = without[0].stats;
-  const int lost_with = static_cast<int>(with[0].lost.size()), lost_without = static_cast<int>(without[0].lost.size());
-  const int before = a.tracked + lost_with;
-  std::printf("exposure 0.6x: %d tracks before; lost %d with compensation (gain %.3f), %d without\n", before,
-              lost_with, a.exposure_gain, lost_without);
-  ASSERT_GT(before, 40);
-  EXPECT_NEAR(a.exposure_gain, 0.6, 0.02);
-  EXPECT_LE(lost_with, 0.10 * before);
-  EXPECT_GE(lost_without, 0.25 * before);
-  EXPECT_EQ(b.exposure_gain, 1.0f);
+  const ExposureStep e = RunExposureStep(0.6);
+  ASSERT_GT(e.before, 40);
+  EXPECT_NEAR(e.gain_with, 0.6, 0.02);
+  EXPECT_LE(e.lost_with, 0.10 * e.before);
+  EXPECT_GE(e.lost_without, 0.25 * e.before);
+  EXPECT_EQ(e.gain_without, 1.0f);
 }
 
 // A step down so large that Lucas-Kanade follows almost no track before the compensation (0.4x here; the rendered
@@ -174,20 +188,11 @@ TEST(FrontendRendered, AnExposureStepKeepsTheTracks) {
 // 10 % lost with it, the gain within 0.02; and the step must lose at least 90 % of the tracks without compensation
 // (else the windows of the followed tracks would measure it and this would test nothing new).
 TEST(FrontendRendered, AnExposureStepThatLosesEveryTrackIsMeasuredAtThePredictions) {
-  const auto darker = [](int, cv::Mat& img) { img.convertTo(img, -1, 0.4); };
-  FrontendOptions off;
-  off.exposure_min_change = 0;
-  const std::vector<FrameResult> with = RunWithChange(FrontendOptions{}, 30, 31, darker);
-  const std::vector<FrameResult> without = RunWithChange(off, 30, 31, darker);
-  const FrameStats& a = with[0].stats;
-  const int lost_with = static_cast<int>(with[0].lost.size()), lost_without = static_cast<int>(without[0].lost.size());
-  const int before = a.tracked + lost_with;
-  std::printf("exposure 0.4x: %d tracks before; lost %d with compensation (gain %.3f), %d without\n", before,
-              lost_with, a.exposure_gain, lost_without);
-  ASSERT_GT(before, 40);
-  ASSERT_GE(lost_without, 0.90 * before);
-  EXPECT_NEAR(a.exposure_gain, 0.4, 0.02);
-  EXPECT_LE(lost_with, 0.10 * before);
+  const ExposureStep e = RunExposureStep(0.4);
+  ASSERT_GT(e.before, 40);
+  ASSERT_GE(e.lost_without, 0.90 * e.before);
+  EXPECT_NEAR(e.gain_with, 0.4, 0.02);
+  EXPECT_LE(e.lost_with, 0.10 * e.before);
 }
 
 // The same measurement must not take a jolt for a change of light: a frame whose tracks all fail because the view
