@@ -71,6 +71,7 @@ FrameReport FrameTracker::TrackFrame(int slot, const std::optional<Pose>& pose_h
     for (MapPoint* p : pts) p->inlier = true;  // everyone gets another chance in the next frame
     const bool turning = !panorama_bearings_.empty();
     const bool jumped_before = jump_slot_ == slot - 1;
+    const int jumps_before = jumped_before ? jump_run_ : 0;
     if (!pose_hint && s_.options.rotation_only && TrackRotationOnly(slot, &r)) {
       r.provisional = bridge_.active();  // a turn in a provisional map: its scale is the provisional one
       r.track_ms = Ms(t0);
@@ -88,7 +89,7 @@ FrameReport FrameTracker::TrackFrame(int slot, const std::optional<Pose>& pose_h
     // A turn that ended in a move, the map out of view: a bridge over what is not mapped.
     // (A turn whose residual jumped at this frame is still under way: the bridge waits for the next frame to tell.)
     const bool turn_ended = turning && panorama_bearings_.empty();
-    const bool last_of_turn = s_.last_posed_slot == slot - 1 || (s_.last_posed_slot == slot - 2 && jumped_before);
+    const bool last_of_turn = s_.last_posed_slot == slot - 1 - jumps_before;
     if (s_.options.bridge && turn_ended && !pose_hint && !settler_.active() && last_of_turn && bridge_.Start(slot))
       r.note += fmt::format("; a provisional map will be made from frame {}", bridge_.anchor_index());
     s_.MarkSeen(slot);
@@ -130,10 +131,13 @@ FrameReport FrameTracker::TrackFrame(int slot, const std::optional<Pose>& pose_h
 }
 
 bool FrameTracker::TrackRotationOnly(int slot, FrameReport* r, bool over_pose) {
-  // Only right after a posed frame: its centre is where the camera still is if it only turned (or after the one
-  // frame of a turn under way whose residual jumped, below).
-  const bool after_jump = jump_slot_ == slot - 1 && !panorama_bearings_.empty() && s_.last_posed_slot == slot - 2;
+  // Only right after a posed frame: its centre is where the camera still is if it only turned (or after the
+  // frames of a turn under way whose residual jumped, below).
+  const bool after_jump =
+      jump_slot_ == slot - 1 && !panorama_bearings_.empty() && s_.last_posed_slot == slot - 1 - jump_run_;
+  const int jumps_before = after_jump ? jump_run_ : 0;
   jump_slot_ = -1;
+  jump_run_ = 0;
   if ((s_.last_posed_slot != slot - 1 && !after_jump) || s_.last_posed_slot < 0) {
     panorama_bearings_.clear();
     return false;
@@ -206,11 +210,18 @@ bool FrameTracker::TrackRotationOnly(int slot, FrameReport* r, bool over_pose) {
   // (a homography explained its tracks) until the turn had swept most of them out of view, and frames 111-190 were
   // lost. Such a frame is lost but the turn is kept; the next frame either turns on (about the same centre, its
   // residual back within the bound) or confirms the move, and the turn ends there as it would have a frame earlier.
-  if (s_.options.rotation_only_keep_turn_over_a_jump && moved && !over_pose && !after_jump && rot.ok &&
-      ratio >= s_.options.rotation_only_min_ratio) {
+  // A blurred frame (the front end measured its patches less sharp: a shake) tells nothing of a move either: its
+  // corners lie off where the sharp frames see them. So a frame after a jump that jumps too is kept over when it is
+  // blurred, and the first sharp frame tells (rotation scenario with exposure steps and two of every ten frames
+  // blurred, seed 8: the second blurred frame of a pair ended the turn, the provisional map under it was lost and
+  // the rest of the run took the old map's scale, 5.6 % of the path).
+  if (s_.options.rotation_only_keep_turn_over_a_jump && moved && !over_pose && (!after_jump || fr.blurred) &&
+      rot.ok && ratio >= s_.options.rotation_only_min_ratio) {
     r->note = fmt::format("no turn about the last centre: the tracks' residual jumped to {:.2f} px from {:.2f} (the "
-                          "next frame tells a move from noise)", rot.rms_px, panorama_min_rms_px_);
+                          "next {}frame tells a move from noise)", rot.rms_px, panorama_min_rms_px_,
+                          fr.blurred ? "sharp " : "");
     jump_slot_ = slot;
+    jump_run_ = jumps_before + 1;
     return false;
   }
   if (!rot.ok || ratio < s_.options.rotation_only_min_ratio || moved) {

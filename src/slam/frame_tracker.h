@@ -36,6 +36,9 @@ class FrameTracker {
   double turn_min_rms_px() const { return panorama_min_rms_px_; }
   // A later turn starts afresh (its centre found again).
   void EndTurn() { panorama_bearings_.clear(); }
+  // Frame `slot` was lost with the turn under way kept: its residual jumped, and the next frame tells a move from
+  // noise (SystemOptions::rotation_only_keep_turn_over_a_jump).
+  bool TurnKeptOver(int slot) const { return jump_slot_ == slot; }
 
  private:
   // SystemOptions::rotation_only: poses `slot` by its rotation about the last tracked centre when the tracks
@@ -63,8 +66,10 @@ class FrameTracker {
   std::vector<std::pair<int, double>> panorama_rms_px_;  // each of its frames (slot) and its residual, in order
   std::unordered_map<int64_t, Eigen::Vector3d> panorama_bearings_;
   // The frame of the turn under way whose residual jumped past the move test's bound, lost but the turn kept for
-  // the next frame to tell a move from noise (-1: none).
+  // the next frame to tell a move from noise (-1: none); and how many frames in a row, up to it, jumped so (more
+  // than one only through blurred frames).
   int jump_slot_ = -1;
+  int jump_run_ = 0;
 };
 
 }  // namespace mcslam::slam
