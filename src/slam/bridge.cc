@@ -176,7 +176,7 @@ std::vector<FrameReport> Bridge::Join(int slot, const Pose& cam_from_world) {
   // in the second blurred frame of a pair, whose residual jumped as the first's did; the provisional map of 147
   // points was given up there and the rest of the run went on at the old map's scale (5.6 % of the path).
   if (active() && !s_.map.frames[slot].has_pose) {
-    if (tracker_.TurnKeptOver(slot)) {
+    if (s_.options.bridge_join_waits_over_a_jump && tracker_.TurnKeptOver(slot)) {
       r.note += "; the map is found again: the join waits for the next frame";
       return {r};
     }

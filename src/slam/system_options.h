@@ -266,6 +266,11 @@ struct SystemOptions {
   // becomes part of the map. A provisional map whose tracking fails first leaves the map (its frames keep their
   // poses). docs/rotation_only.md.
   bool bridge = true;
+  // A frame that finds the map again while its turn is kept over a jump of the turn's residual (it has no pose in
+  // the provisional map being tracked) leaves the join to the next frame, which turns on and joins from its pose in
+  // the provisional map, or loses it. false: the provisional map is given up at that frame, the turn with it.
+  // docs/rotation_only.md.
+  bool bridge_join_waits_over_a_jump = true;
   // A map that stays lost (the camera went where no relocalisation finds it, right after a weak initialisation,
   // or after a long blackout) is replaced by a new one initialised from the frames that follow, once the frames
   // lost in a row reach restart_min_lost_frames and outnumber the frames the map posed: the run then keeps the

@@ -309,12 +309,17 @@ TEST(CliRun, ASmallParallaxProvisionalMapTakesTheBetterMinimumOfTheBasReliefVall
 // there, their 14-17 map points 22-24 px from where they are seen. Now a turn's centre is looked for only among
 // the frames posed since the last relocalisation. Measured: frames 196-199 turn about frame 195's centre,
 // 0.78-0.87 px, 0.8 cm from the truth (12.9 cm before). Bounds: at least one such turn over a weak pose after
-// the relocalisation (the case itself), each within the pose step's inlier threshold of 3 px.
+// the relocalisation (the case itself), each within the pose step's inlier threshold of 3 px. Frame 195's turn
+// residual jumped; by default the join now waits for the next frame there (SystemOptions::
+// bridge_join_waits_over_a_jump), which joins the provisional map instead of losing it, and the case does not
+// arise: the test gives the provisional map up at that frame as before, to reach it.
 TEST(CliRun, ATurnOverAWeakPoseAfterARelocalisationFitsItsPoints) {
   TempDir dir;
   const auto s = RunMcslam(fmt::format("synth --scenario rotation --seed 6 --image-noise 6 --render --out {}", dir / "s"));
   ASSERT_EQ(s.exit_code, 0) << s.output;
-  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed 6 --end 205 --out {}", dir / "s", dir / "r"));
+  testing::WriteText(dir / "o.json", R"({"options": {"system": {"bridge_join_waits_over_a_jump": false}}})");
+  const auto r = RunMcslam(fmt::format("run {} --dataset synthetic --seed 6 --end 205 --options-from {} --out {}",
+                                       dir / "s", dir / "o.json", dir / "r"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string csv = dir / "r/frames.csv";
   const std::vector<std::string> notes = testing::CsvColumn(csv, "note"), inliers = testing::CsvColumn(csv, "inliers"),
