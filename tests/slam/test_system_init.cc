@@ -472,7 +472,7 @@ TEST(System, TheInitialisationWaitsForASharpFrame) {
   apps::SequenceInput in = Scenario(60, 0.5, 0.0);
   const auto init_frame = [](const apps::SlamRunResult& res) {
     for (const FrameReport& r : res.reports)
-      if (r.initialisation && !r.note.empty()) return static_cast<int>(r.index);
+      if (r.initialisation && r.note.rfind("initialised from", 0) == 0) return static_cast<int>(r.index);
     return -1;
   };
   const int sharp = init_frame(RunSystem(in));
