@@ -144,9 +144,11 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       e = MeasureExposure(prev_pyramid[0], gray, a, c);
     }
     if (e.n >= kMinExposureWindows && std::abs(std::log(e.gain)) > std::log1p(o.exposure_min_change)) {
-      const std::vector<cv::Point2f> p1_before = p1;
-      const std::vector<float> err_before = err;
-      const std::vector<uint8_t> outcome_before = outcome;
+      // Only the round measured at the predictions can be undone: its state is kept to restore.
+      std::vector<cv::Point2f> p1_before;
+      std::vector<float> err_before;
+      std::vector<uint8_t> outcome_before;
+      if (at_predictions) p1_before = p1, err_before = err, outcome_before = outcome;
       cv::Mat exposed;
       prev_pyramid[0].convertTo(exposed, CV_8U, e.gain);
       cv::buildOpticalFlowPyramid(exposed, exposed_pyramid, win, static_cast<int>(prev_pyramid.size() / 2) - 1);
@@ -157,7 +159,7 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       const auto now_followed = std::count(outcome.begin(), outcome.end(), kOk);
       if (at_predictions && (2 * now_followed < static_cast<std::ptrdiff_t>(n) || now_followed < kMinExposureWindows ||
                              now_followed < 2 * followed)) {
-        p1 = p1_before, err = err_before, outcome = outcome_before;
+        p1 = std::move(p1_before), err = std::move(err_before), outcome = std::move(outcome_before);
         from_pyramid = &prev_pyramid;
         st.exposure_gain = 1;
       }

@@ -20,6 +20,13 @@
 
 namespace mcslam::slam {
 
+bool SelfCalibrationIsTaken(const SelfCalibration& c, const InitOptions& io) {
+  // At calibration_min_half_share 0 only the halves' direction is tested (no bound on their size).
+  return std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
+         c.corner_shift_px >= io.calibration_min_shift_px && c.min_half_share >= io.calibration_min_half_share &&
+         c.max_half_share * io.calibration_min_half_share <= 1.0;
+}
+
 using detail::CappedMeanSquarePx2;
 using detail::EvenlySpread;
 using detail::kCostFloorPx2;
@@ -255,18 +262,19 @@ bool Settler::SelfCalibrate(const std::vector<int>& window, const std::vector<Po
   const double change = c.k1_measured - c.k1_given;
   auto share = [&](int half) { return change == 0 ? 0.0 : (c.k1_half[half] - c.k1_given) / change; };
   c.min_half_share = std::min(share(0), share(1));
+  c.max_half_share = std::max(share(0), share(1));
   c.corner_shift_px = 0;
   for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(s_.camera.width - 1, 0),
                                        Eigen::Vector2d(0, s_.camera.height - 1),
                                        Eigen::Vector2d(s_.camera.width - 1, s_.camera.height - 1)})
     c.corner_shift_px = std::max(c.corner_shift_px, (fit.camera.UndistortPixel(corner) - s_.camera.UndistortPixel(corner)).norm());
-  c.accepted = std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
-               c.corner_shift_px >= io.calibration_min_shift_px && c.min_half_share >= io.calibration_min_half_share;
+  c.accepted = SelfCalibrationIsTaken(c, io);
   c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
                        "the farthest corner; halves of the points {:.4f} +- {:.4f} and {:.4f} +- {:.4f}, the "
-                       "smaller {:.2f} of the change): {}",
+                       "smaller {:.2f} and the larger {:.2f} of the change): {}",
                        c.accepted ? "self-calibrated" : "checked", c.frames, c.points, c.k1_measured, c.sigma_k1, c.z,
                        c.corner_shift_px, c.k1_half[0], c.sigma_k1_half[0], c.k1_half[1], c.sigma_k1_half[1], c.min_half_share,
+                       c.max_half_share,
                        c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
                                   : fmt::format("k1 {:g} kept", c.k1_given));
   if (!c.accepted) return false;
