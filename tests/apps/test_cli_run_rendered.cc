@@ -204,22 +204,28 @@ TEST(CliRun, AJoinMadeInATurnAdjustsTheProvisionalMapThroughTheTurn) {
 // swept most of its tracks out of view, and frames 111-190 were lost (186 of 270 tracked). Now frame 111 is lost
 // alone and frame 112 turns on about the same centre (0.32 px). Measured 265 of 270 tracked, ATE 0.69 cm (the 186
 // frames before: 0.54 cm); seeds 12 and 15 of the same renders 261 -> 268 tracked and 14.1 -> 1.4 cm, 186 -> 267
-// tracked (docs/rotation_only.md). Bounds: at least 255 frames tracked (186 before; the turn's 5 worst frames
-// and a margin of as many again), the jump said in the notes and the frame after it turned, ATE under 2 cm (3x
-// the 0.69 measured, and under the scenario's 1 %-of-path rule: the path is 3.3 m).
+// tracked (docs/rotation_only.md). Which frames jump differs with the CPU's vector width: on a portable AVX2 build
+// seed 3 tracks as well with no jump at all, while seeds 12 and 15 jump 2-3 times on both builds (AVX-512 and AVX2,
+// 2026-12-06), each jump followed by a turned frame, 267-268 tracked, ATE 1.39-1.56 cm. So the three seeds run, each
+// held to the outcome and the three together to the mechanism. Bounds: at least 255 frames tracked (186 before; the
+// turn's 5 worst frames and a margin of as many again), ATE under 2.5 cm (1.6x the worst measured, under the
+// scenario's 1 %-of-path rule: the path is 3.3 m), and at least one jump said in the notes with the frame after it
+// turned.
 TEST(CliRun, OneFrameWhoseResidualJumpsDoesNotEndATurn) {
-  TempDir dir;
-  const auto r = RunRenderedRotation(dir, 3, "", "--image-noise 6");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_GE(Field(r.output, "tracked"), 255) << r.output;
-  EXPECT_LT(Field(r.output, "ate_rmse"), 0.02) << r.output;
-  const std::vector<std::string> note = testing::CsvColumn(dir / "r/frames.csv", "note");
   int jumps = 0, turned_after = 0;
-  for (size_t i = 0; i + 1 < note.size(); ++i)
-    if (note[i].find("residual jumped") != std::string::npos) {
-      ++jumps;
-      turned_after += note[i + 1].find("rotation only") != std::string::npos;
-    }
+  for (const int seed : {3, 12, 15}) {
+    TempDir dir;
+    const auto r = RunRenderedRotation(dir, seed, "", "--image-noise 6");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_GE(Field(r.output, "tracked"), 255) << "seed " << seed << ": " << r.output;
+    EXPECT_LT(Field(r.output, "ate_rmse"), 0.025) << "seed " << seed << ": " << r.output;
+    const std::vector<std::string> note = testing::CsvColumn(dir / "r/frames.csv", "note");
+    for (size_t i = 0; i + 1 < note.size(); ++i)
+      if (note[i].find("residual jumped") != std::string::npos) {
+        ++jumps;
+        turned_after += note[i + 1].find("rotation only") != std::string::npos;
+      }
+  }
   EXPECT_GE(jumps, 1);
   EXPECT_GE(turned_after, 1);
 }
