@@ -171,18 +171,23 @@ TEST(CliRun, AProvisionalMapBridgesTheMoveAfterATurnAwayFromTheMapAndJoinsIt) {
 // map's points, only the map's few that relocalised it, and nothing but the anchor held the provisional map's far
 // end, so it was joined scaled but not adjusted. Now the turn ties it: the joining frame turned about the centre of
 // the keyframe the turn started from, so its observations of the map, turned back, are that keyframe's, and the
-// bridge is adjusted between the anchor and it. The rotation scenario rendered with noise of 6 grey levels, seeds
-// 1-20 (docs/rotation_only.md): ATE seed 2 22.1 -> 3.1 cm, seed 9 4.6 -> 4.1 cm with the join's note saying 0 and
-// then 65 and 70 keyframes adjusted (with the turn kept over a jump of its residual, OneFrameWhoseResidual... below;
-// 2.5 cm for seed 9 without that). Bounds for seeds 2 and 9: the join was made in a turn and adjusted more than 20
-// keyframes, and ATE under 6.5 cm (2 % of the path: 1.6x the worse of the two, under a third of seed 2's 22.1 cm
-// without the adjustment; seed 9 passes that bound either way, its join's note is what fails without it).
+// bridge is adjusted between the anchor and it. The rotation scenario rendered with noise of 6 grey levels
+// (docs/rotation_only.md): seed 2 22.1 -> 3.1 cm, seed 9 4.6 -> 4.1 cm with the join's note saying 0 and then 65
+// and 70 keyframes adjusted. Seeds 1, 2, 9, 12 and 17 join in a turn on both builds measured (2026-12-06, the
+// native AVX-512 build and the portable AVX2 one): ATE 2.5, 3.1, 4.1, 1.4, 2.1 cm (median 2.5) and 2.1, 9.5, 2.7,
+// 1.6, 2.3 cm (median 2.3). Which seed goes worst differs with the vector width (AVX2's seed 2 joins three frames
+// earlier, on 17 relocalised points, scaled 1.368 against 1.200), so the outcome is held over the five: the median
+// under 4 cm (1.6x the worse median, 1.2 % of the 3.3 m path; seeds 1, 2 and 9 without the adjustment measured 4.3,
+// 22.1 and 4.6 cm) and every seed under 15 cm (1.6x the worst, under seed 2's 22.1 cm without the adjustment).
+// Each seed: one join made in a turn, with more than 20 keyframes adjusted (64-71 measured).
 TEST(CliRun, AJoinMadeInATurnAdjustsTheProvisionalMapThroughTheTurn) {
-  for (const int seed : {2, 9}) {
+  std::vector<double> ate;
+  for (const int seed : {1, 2, 9, 12, 17}) {
     TempDir dir;
     const auto r = RunRenderedRotation(dir, seed, "", "--image-noise 6");
     ASSERT_EQ(r.exit_code, 0) << r.output;
-    EXPECT_LT(Field(r.output, "ate_rmse"), 0.065) << "seed " << seed << ": " << r.output;
+    ate.push_back(Field(r.output, "ate_rmse"));
+    EXPECT_LT(ate.back(), 0.15) << "seed " << seed << ": " << r.output;
     int joined_in_turn = 0, adjusted = 0;
     for (const std::string& note : testing::CsvColumn(dir / "r/frames.csv", "note")) {
       if (note.find("the provisional map joins it") == std::string::npos || note.find("rotation only") == std::string::npos)
@@ -196,6 +201,8 @@ TEST(CliRun, AJoinMadeInATurnAdjustsTheProvisionalMapThroughTheTurn) {
     EXPECT_EQ(joined_in_turn, 1) << "seed " << seed;
     EXPECT_GT(adjusted, 20) << "seed " << seed;
   }
+  std::nth_element(ate.begin(), ate.begin() + 2, ate.end());
+  EXPECT_LT(ate[2], 0.04) << "median ATE of seeds 1, 2, 9, 12, 17";
 }
 
 // One frame of a turn whose residual jumps is not yet a move. The rotation scenario rendered with noise of 6 grey
