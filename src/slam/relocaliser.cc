@@ -10,26 +10,27 @@
 
 namespace mcslam::slam {
 
-std::optional<Relocalisation> Relocalise(const SlamState& s, const Bridge& bridge,
-                                         const std::vector<RelocalisationMatch>& matches) {
+namespace {
+
+// Relocalise's search on matches already in undistorted pixels.
+std::optional<Relocalisation> RelocaliseUndistorted(const SlamState& s, const Bridge& bridge,
+                                                    const std::vector<FeatureUndistorted>& matches, int min_inliers) {
   if (!s.initialised) return std::nullopt;
   std::vector<PointObservation> obs;
   std::vector<Eigen::Vector3d> P;
   std::vector<Eigen::Vector2d> uv;
   std::vector<int64_t> ids;
-  for (const RelocalisationMatch& m : matches) {
-    const MapPoint* p = s.map.Find(m.point_id);
+  for (const FeatureUndistorted& m : matches) {
+    const MapPoint* p = s.map.Find(m.id);
     if (!p || p->state == PointState::kRemoved || !m.uv_px.allFinite()) continue;
-    if (bridge.Provisional(m.point_id)) continue;  // only the map the provisional one joins
-    const Eigen::Vector2d u = s.camera.UndistortPixel(m.uv_px);
-    if (!u.allFinite()) continue;
-    obs.push_back({p->position_in_world, u, true});
+    if (bridge.Provisional(m.id)) continue;  // only the map the provisional one joins
+    obs.push_back({p->position_in_world, m.uv_px, true});
     P.push_back(p->position_in_world);
-    uv.push_back(s.ideal.PixelToNormalized(u));
-    ids.push_back(m.point_id);
+    uv.push_back(s.ideal.PixelToNormalized(m.uv_px));
+    ids.push_back(m.id);
   }
-  if (static_cast<int>(P.size()) < s.options.relocalise_min_inliers) return std::nullopt;
-  geometry::PnpOptions po = s.TrackerPnpOptions(s.options.relocalise_min_inliers);
+  if (static_cast<int>(P.size()) < min_inliers) return std::nullopt;
+  geometry::PnpOptions po = s.TrackerPnpOptions(min_inliers);
   po.iterations = 500;  // no prior and maybe half the matches wrong
   std::optional<Pose> pose = geometry::SolvePnp(P, uv, po);
   bool guided = false;
@@ -57,8 +58,26 @@ std::optional<Relocalisation> Relocalise(const SlamState& s, const Bridge& bridg
   s.pose_step->ClassifyInliers(*pose, obs, &res, &inl);
   for (size_t i = 0; i < ids.size(); ++i)
     if (inl[i]) r.inlier_point_ids.push_back(ids[i]);
-  if (static_cast<int>(r.inlier_point_ids.size()) < s.options.relocalise_min_inliers) return std::nullopt;
+  if (static_cast<int>(r.inlier_point_ids.size()) < min_inliers) return std::nullopt;
   return r;
+}
+
+}  // namespace
+
+std::optional<Relocalisation> Relocalise(const SlamState& s, const Bridge& bridge,
+                                         const std::vector<RelocalisationMatch>& matches) {
+  std::vector<FeatureUndistorted> undistorted;
+  for (const RelocalisationMatch& m : matches) {
+    if (!m.uv_px.allFinite()) continue;
+    const Eigen::Vector2d u = s.camera.UndistortPixel(m.uv_px);
+    if (u.allFinite()) undistorted.push_back({m.point_id, u});
+  }
+  return RelocaliseUndistorted(s, bridge, undistorted, s.options.relocalise_min_inliers);
+}
+
+std::optional<Relocalisation> RelocaliseByTracks(const SlamState& s, const Bridge& bridge, int slot) {
+  // Tracks are not matches by look: as many as the pose step needs to track a frame.
+  return RelocaliseUndistorted(s, bridge, s.map.frames[slot].features, s.options.tracker.min_inliers);
 }
 
 }  // namespace mcslam::slam

@@ -35,4 +35,9 @@ struct Relocalisation {
 std::optional<Relocalisation> Relocalise(const SlamState& s, const Bridge& bridge,
                                          const std::vector<RelocalisationMatch>& matches);
 
+// The same search on the frame's own tracks of map points (the frame in slot, its features under their points' ids):
+// a frame that follows enough of the map's points needs no descriptor to be placed by them. Tracks are not matches
+// by look alone: as many as the pose step needs to track a frame (PoseTrackerOptions::min_inliers) agree.
+std::optional<Relocalisation> RelocaliseByTracks(const SlamState& s, const Bridge& bridge, int slot);
+
 }  // namespace mcslam::slam

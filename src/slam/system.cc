@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -20,6 +21,7 @@
 #include "slam/initializer.h"
 #include "slam/mapper.h"
 #include "slam/point_adjuster.h"
+#include "slam/relocaliser.h"
 #include "slam/slam_state.h"
 #include "slam/system_internal.h"
 
@@ -260,12 +262,21 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
     out.assign(1, r);
     return out;
   }
+  std::optional<Pose> hint = frame.pose_hint;
+  std::string placed_note;
   if (st_->bridge.waiting()) {
-    if (!frame.pose_hint) return st_->bridge.Try(slot);
+    if (!hint && s.options.bridge_wait_placed_by_map_tracks)
+      if (const std::optional<Relocalisation> r = RelocaliseByTracks(s, st_->bridge, slot)) {
+        hint = r->cam_from_world;
+        placed_note = fmt::format("placed in the map by its own tracks of {} of its points; no provisional map needed",
+                                  r->inlier_point_ids.size());
+      }
+    if (!hint) return st_->bridge.Try(slot);
     st_->bridge.Drop();  // relocalised in the map itself before a provisional map was made: none is needed
   }
-  if (st_->bridge.active() && frame.pose_hint) return st_->bridge.Join(slot, *frame.pose_hint);
-  out.push_back(st_->tracker.TrackFrame(slot, frame.pose_hint));
+  if (st_->bridge.active() && hint) return st_->bridge.Join(slot, *hint);
+  out.push_back(st_->tracker.TrackFrame(slot, hint));
+  if (!placed_note.empty()) out.front().note += (out.front().note.empty() ? "" : "; ") + placed_note;
   if (out.front().status == FrameStatus::kTracked && st_->settler.Due(slot)) {
     const auto t0 = std::chrono::steady_clock::now();
     st_->settler.Settle(slot, &out);

@@ -276,6 +276,14 @@ struct SystemOptions {
   // the provisional map, or loses it. false: the provisional map is given up at that frame, the turn with it.
   // docs/rotation_only.md.
   bool bridge_join_waits_over_a_jump = true;
+  // While a provisional map is waited for (the map out of view, the turn ended in a move), a frame whose own tracks
+  // follow as many of the map's points as the pose step needs (tracker.min_inliers), agreeing on a pose (RANSAC
+  // PnP, as a relocalisation), is placed in the map by them and the provisional map is not made. The map's points
+  // come back into the tracks by a relocalisation whose frame could not join (it had no pose in the provisional
+  // map, which the next frame then lost): no descriptor relocalises them again, and the pose step takes no point
+  // that was no inlier of the frame before. false: the frames wait for the provisional map's two views.
+  // docs/rotation_only.md.
+  bool bridge_wait_placed_by_map_tracks = true;
   // A map that stays lost (the camera went where no relocalisation finds it, right after a weak initialisation,
   // or after a long blackout) is replaced by a new one initialised from the frames that follow, once the frames
   // lost in a row reach restart_min_lost_frames and outnumber the frames the map posed: the run then keeps the
