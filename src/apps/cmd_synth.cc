@@ -198,6 +198,11 @@ void RegisterSynth(CLI::App& app) {
   cmd->add_option("--image-noise", args->render_options.image_noise, "Grey-level noise of the rendered images")
       ->check(FiniteNumber(0.0, false, 255.0, "a number in [0, 255]"))
       ->capture_default_str();
+  cmd->add_option("--edge-samples", args->render_options.edge_samples,
+                  "Rays a pixel on an outline is shaded again from (its coverage as a sensor's pixel integrates it; "
+                  "0: the 2x2 grid of rays only, as every render before this option)")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
   cmd->add_option("--exposure-step", args->render_options.exposure_step,
                   "The rendered camera's exposure steps every 40 frames through 1, F, 1/F (an auto exposure that "
                   "jumps; 1: fixed)")

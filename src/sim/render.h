@@ -17,6 +17,10 @@ namespace mcslam::sim {
 
 struct RenderOptions {
   int supersample = 2;          // rays per pixel along each axis (anti-aliasing)
+  // Rays a pixel on an outline (its samples met more than one surface, or a neighbour's met another) is shaded
+  // again from, spread over the pixel on a Fibonacci lattice (every ray on a row and a column of its own): the
+  // coverage of a sensor's pixel, in steps of 1 / edge_samples. 0: the supersample grid only.
+  int edge_samples = 55;
   double image_noise = 1.0;     // Gaussian noise added to the 8-bit image, grey levels (sensor-like), >= 0
   uint64_t seed = 1;            // textures and noise
   // A camera's own photometry, for the front end's tests against it (docs/robustness_photometric.md):
