@@ -42,12 +42,13 @@ TEST(Render, BoxIsWhereItProjectsTexturedAndDeterministic) {
 }
 
 // An outline at a shallow angle, rendered without noise: in every column the pixels' coverage by the surface
-// below it sums to where the outline crosses that column, as a sensor's pixels integrate the light. A 2 x 2 grid of rays alone gets that wrong by up to a
-// quarter of a pixel, in steps (a staircase whose steps are corners that slide along the outline as the view
-// changes); the outline's pixels shaded again from RenderOptions::edge_samples rays get it to within the
-// lattice's 1/55 px plus the 8-bit rounding (measured: 0.022 px at most over the 200 columns; 0.24 px on the grid
-// alone). Bound 0.04 px: a sixth of the grid's error, 1.8 times the error measured (the geometry is exact and
-// noise-free: no seed, and a vector width changes only the last bits of a ray).
+// below it sums to where the outline crosses that column, as a sensor's pixels integrate the light. A 2 x 2 grid
+// of rays alone gets that wrong by up to a quarter of a pixel, in steps (a staircase whose steps are corners that
+// slide along the outline as the view changes); the outline's pixels shaded again from
+// RenderOptions::edge_samples rays get it to within the lattice's 1/55 px plus the 8-bit rounding (measured:
+// 0.022 px at most over the 200 columns; 0.24 px on the grid alone). Bound 0.04 px: a sixth of the grid's
+// error, 1.8 times the error measured (the geometry is exact and noise-free: no seed, and a vector width changes
+// only the last bits of a ray).
 TEST(Render, AnOutlineCoversItsPixelsAsASensorIntegratesThem) {
   // The plane z = 2 m facing the camera at the origin; the quad's top edge rises 1 in 40 across the image.
   constexpr double kZ = 2.0, kSlope = 0.025, kF = 500;
