@@ -43,26 +43,31 @@ Eigen::Matrix3d RotationFromBearings(std::span<const Eigen::Vector3d> ref, std::
   return svd.matrixV() * d * svd.matrixU().transpose();
 }
 
-double NonRotationalMotionRad(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam) {
+Eigen::Matrix3d RobustRotationFromBearings(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam) {
   // Each refit takes the better half under the last rotation: the first, fitted to every pair, may be tilted by
   // the wrong ones, and its better half hold some of them still.
   constexpr int kRefits = 3;
   const size_t n = std::min(ref.size(), cam.size());
-  if (n < 3) return 0.0;
-  const auto residuals = [&](const Eigen::Matrix3d& r) {
-    std::vector<double> a(n);
-    for (size_t k = 0; k < n; ++k) a[k] = AngleBetween(r * ref[k], cam[k]);
-    return a;
-  };
-  std::vector<double> a = residuals(RotationFromBearings(ref.first(n), cam.first(n)));
+  Eigen::Matrix3d r = RotationFromBearings(ref.first(n), cam.first(n));
+  std::vector<double> a(n);
   for (int refit = 0; refit < kRefits; ++refit) {
+    for (size_t k = 0; k < n; ++k) a[k] = AngleBetween(r * ref[k], cam[k]);
     const double cut = UpperMedian(a);
     std::vector<Eigen::Vector3d> ref_in, cam_in;
     for (size_t k = 0; k < n; ++k)
       if (a[k] <= cut) ref_in.push_back(ref[k]), cam_in.push_back(cam[k]);
     if (ref_in.size() < 3) break;
-    a = residuals(RotationFromBearings(ref_in, cam_in));
+    r = RotationFromBearings(ref_in, cam_in);
   }
+  return r;
+}
+
+double NonRotationalMotionRad(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam) {
+  const size_t n = std::min(ref.size(), cam.size());
+  if (n < 3) return 0.0;
+  const Eigen::Matrix3d r = RobustRotationFromBearings(ref, cam);
+  std::vector<double> a(n);
+  for (size_t k = 0; k < n; ++k) a[k] = AngleBetween(r * ref[k], cam[k]);
   return UpperMedian(std::move(a));
 }
 

@@ -32,11 +32,14 @@ struct RotationOnlyResult {
 // parallel): argmax sum cam_k . (R ref_k) over rotations (Kabsch / Wahba).
 Eigen::Matrix3d RotationFromBearings(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam);
 
+// The least-squares rotation of all pairs refitted three times, each time to the half of them that fits the last
+// one best (a few wrong pairs must not tilt the rotation the others share). Identity with fewer than 2 pairs.
+Eigen::Matrix3d RobustRotationFromBearings(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam);
+
 // The part of the bearings' motion that no rotation explains: the median angle (radians) between cam_k and
-// R ref_k, R the least-squares rotation of all pairs refitted three times, each time to the half of them that fits
-// the last one best (a few wrong pairs must not tilt the rotation the others share). A camera that turned about its centre leaves only the
-// bearings' noise; one that moved leaves its parallax times the spread of the depths about the depth it fixates,
-// however it turned meanwhile. 0 with fewer than 3 pairs.
+// R ref_k, R = RobustRotationFromBearings. A camera that turned about its centre leaves only the bearings' noise;
+// one that moved leaves its parallax times the spread of the depths about the depth it fixates, however it turned
+// meanwhile. 0 with fewer than 3 pairs.
 double NonRotationalMotionRad(std::span<const Eigen::Vector3d> ref, std::span<const Eigen::Vector3d> cam);
 
 // cam_from_ref such that cam_k ~ cam_from_ref * ref_k for the inliers (unit bearings). Fails (ok = false, with the

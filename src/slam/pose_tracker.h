@@ -116,9 +116,13 @@ class PoseTracker {
 
   // Estimates the pose of a frame from the previous pose. `residuals_px` and `inliers` receive one entry
   // per observation (residual at the estimated pose; inlier flag for the next frame). frame_index seeds
-  // the fresh random mode.
+  // the fresh random mode. frames_since_prev: how many frames after prev's this one is (> 1 after frames without
+  // a pose): the motion from prev to the estimate counts per frame of it in the next frame's spread.
+  // min_sigma_rot_deg: the rotation spread at least this (the turn the tracks measured since prev, where the
+  // tracker has no rate of its own: right after a relocalised frame).
   PoseEstimate Track(const Pose& prev_cam_from_world, const std::vector<PointObservation>& observations,
-                     uint64_t frame_index, std::vector<double>* residuals_px, std::vector<uint8_t>* inliers);
+                     uint64_t frame_index, std::vector<double>* residuals_px, std::vector<uint8_t>* inliers,
+                     uint64_t frames_since_prev = 1, double min_sigma_rot_deg = 0);
 
   // Residuals and inlier flags of the observations at a given pose (used for the first frame).
   int ClassifyInliers(const Pose& cam_from_world, const std::vector<PointObservation>& observations,
@@ -153,9 +157,10 @@ class PoseTracker {
   compute::NormalTable table_;
   // Scoring set, structure of arrays; reused across frames (no allocation per frame once warm).
   std::vector<float> sx_, sy_, sz_, su_, sv_;
-  // Rotation between the previous pose and the estimate of the last tracked frame (0 after a lost one).
+  // Rotation between the previous pose and the estimate of the last tracked frame, per frame between them (0
+  // after a lost one).
   double last_rotation_deg_ = 0;
-  // The camera centre's move from the previous pose to the estimate of the last tracked frame (m).
+  // The camera centre's move from the previous pose to the estimate of the last tracked frame, per frame (m).
   double last_step_m_ = 0;
   // The deviation of the linearised translation's prior for a frame (PoseTrackerOptions::translation_prior_steps).
   double TranslationPriorSigma(uint64_t frame_index) const;

@@ -81,6 +81,20 @@ double MedianAngleDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<E
   return d[d.size() / 2];
 }
 
+TEST(RobustRotationFromBearings, WrongTracksDoNotTiltTheTurn) {
+  // A 12 degree turn (a fast hand-held frame), 0.5 px of noise, 30 % wrong tracks: the plain least-squares fit is
+  // tilted by the wrong ones, the refits to the better half are not. Measured over seeds 1-20: 0.006-0.062 degrees
+  // off; the plain fit 1.97-11.9. Bounds: every seed under 0.25 (4x the worst measured, 8x under the plain fit's
+  // best), and the plain fit over 1 on every seed (else the wrong tracks would test nothing).
+  for (uint64_t seed = 1; seed <= 20; ++seed) {
+    const Bearings b = MakeBearings(seed, 60, 12.0, 0.5, 0.3);
+    const double robust = RotationErrorDeg(RobustRotationFromBearings(b.ref, b.cam), b.cam_from_ref);
+    const double plain = RotationErrorDeg(RotationFromBearings(b.ref, b.cam), b.cam_from_ref);
+    EXPECT_LT(robust, 0.25) << "seed " << seed;
+    EXPECT_GT(plain, 1.0) << "seed " << seed;
+  }
+}
+
 TEST(NonRotationalMotion, ATurnLeavesOnlyTheNoise) {
   // A 20 degree turn about the camera's centre, 1 px of noise per coordinate on the second view, 20 % wrong
   // tracks. A right track's residual is about Rayleigh-distributed (median 1.18 sigma, less off the axis, where a

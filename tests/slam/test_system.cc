@@ -437,11 +437,17 @@ TEST(System, RelocalisesAfterAJumpFromMatchesAlone) {
   // Fewer matches than relocalise_min_inliers: nothing.
   EXPECT_FALSE(system.Relocalise(std::vector<RelocalisationMatch>(m.begin(), m.begin() + 14)).has_value());
 
-  // Without the hint the frame is lost; the next one, with the relocalised pose as its hint, is tracked,
-  // and as accurately as the frames before the jump (compared through the map's similarity to the truth).
+  // The map's frame is the truth's up to a similarity, fixed by the frames before the jump.
+  const eval::Similarity3 s = eval::AlignPositions(est_centres, gt_centres, eval::Alignment::kSim3).gt_world_from_est_world;
+  auto off_m = [&](const FrameReport& r) {
+    return (s * r.cam_from_world.Inverse().t - in.groundtruth.world_from_cam[static_cast<size_t>(r.index)].t).norm();
+  };
+  // Without the hint the frame is lost (its first try is not widened by the turn the tracks measured across the
+  // jump: at that spread it came out 10 cm off, FrameTracker::TrackFrame); the next one, with the relocalised pose
+  // as its hint, is tracked, and as accurately as the frames before the jump.
   const std::vector<FrameReport> jumped = system.Process(after);
   ASSERT_EQ(jumped.size(), 1u);
-  EXPECT_EQ(jumped[0].status, FrameStatus::kLost) << jumped[0].note;
+  EXPECT_EQ(jumped[0].status, FrameStatus::kLost) << jumped[0].note << " " << off_m(jumped[0]);
   FrameObservations next = in.frames[91];
   const std::optional<Relocalisation> r91 = system.Relocalise(matches_of(next));
   ASSERT_TRUE(r91.has_value());
@@ -450,13 +456,9 @@ TEST(System, RelocalisesAfterAJumpFromMatchesAlone) {
   ASSERT_EQ(resumed.size(), 1u);
   EXPECT_EQ(resumed[0].status, FrameStatus::kTracked) << resumed[0].note;
   EXPECT_GT(resumed[0].inliers, 30);
-  // The map's frame is the truth's up to a similarity, fixed by the frames before the jump: the resumed
-  // camera is where the truth says, within 1 cm (the paper's scene is ~3 m away; the clean run's frames
-  // are within 1-2 mm).
-  const eval::Similarity3 s = eval::AlignPositions(est_centres, gt_centres, eval::Alignment::kSim3).gt_world_from_est_world;
-  const Eigen::Vector3d centre = s * resumed[0].cam_from_world.Inverse().t;
-  EXPECT_LT((centre - in.groundtruth.world_from_cam[91].t).norm(), 0.01)
-      << centre.transpose() << " vs " << in.groundtruth.world_from_cam[91].t.transpose();
+  // The resumed camera is where the truth says, within 1 cm (the paper's scene is ~3 m away; the clean run's
+  // frames are within 1-2 mm).
+  EXPECT_LT(off_m(resumed[0]), 0.01);
 }
 
 // Track ids as a KLT front end gives them: a point that leaves the view and comes back is a new track (only
