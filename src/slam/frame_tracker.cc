@@ -39,14 +39,10 @@ namespace {
 // those in `to` (geometry::RobustRotationFromBearings: a few wrong tracks must not make the turn). A camera that
 // moved without turning leaves its parallax in it, a small part of a fast turn. 0 with fewer than 6 shared tracks.
 double TracksTurnDeg(const FrameRecord& from, const FrameRecord& to, const PinholeCamera& ideal) {
-  std::vector<Eigen::Vector3d> a, b;
-  for (const FeatureUndistorted& f : to.features)
-    if (const FeatureUndistorted* g = from.Find(f.id)) {
-      a.push_back(ideal.PixelToNormalized(g->uv_px).homogeneous().normalized());
-      b.push_back(ideal.PixelToNormalized(f.uv_px).homogeneous().normalized());
-    }
-  if (a.size() < 6) return 0;
-  return Eigen::AngleAxisd(geometry::RobustRotationFromBearings(a, b)).angle() * 180.0 / M_PI;
+  std::vector<Eigen::Vector3d> in_from, in_to;
+  detail::SharedBearings(to, from, ideal, &in_to, &in_from);  // in `to`'s order
+  if (in_from.size() < 6) return 0;
+  return Eigen::AngleAxisd(geometry::RobustRotationFromBearings(in_from, in_to)).angle() * 180.0 / M_PI;
 }
 
 }  // namespace

@@ -82,11 +82,7 @@ bool Initializer::FollowsFrom(int k, const Pose& k_from_world, int next) const {
   const FrameRecord& fk = s_.map.frames[k];
   const FrameRecord& fn = s_.map.frames[next];
   std::vector<Eigen::Vector3d> in_k, in_next;
-  for (const FeatureUndistorted& f : fk.features)
-    if (const FeatureUndistorted* g = fn.Find(f.id)) {
-      in_k.push_back(s_.ideal.PixelToNormalized(f.uv_px).homogeneous().normalized());
-      in_next.push_back(s_.ideal.PixelToNormalized(g->uv_px).homogeneous().normalized());
-    }
+  detail::SharedBearings(fk, fn, s_.ideal, &in_k, &in_next);
   if (in_k.size() < kMinTracksToFollow) return true;  // nothing to judge by: as PnP placed it
   const double limit_deg = std::atan(s_.options.tracker.inlier_threshold_px / s_.focal_px) * 180.0 / M_PI;
   return detail::EpipolarDisagreementDeg(in_k, in_next, fn.cam_from_world * k_from_world.Inverse()) <= limit_deg;

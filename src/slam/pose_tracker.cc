@@ -294,10 +294,9 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
       recent_median_residuals_.erase(recent_median_residuals_.begin());
     recent_median_residuals_.push_back(est.median_inlier_residual_px);
   }
-  // Per frame: a pose found after frames without one (a relocalisation, lost frames) moved over all of them, and
-  // taken as one frame's motion it widened the next frame's spread that many times (rendered fast scenario,
-  // seed 2: 8 frames lost, then a rotation spread of the 9 frames' turn let 8 of 11 points fit a pose 8 degrees
-  // off, and the points it made led the next frames 47 degrees astray).
+  // Per frame: a pose found after frames without one moved over all of them, and taken as one frame's motion it
+  // would widen the next frame's spreads that many times (8 degrees found over 8 frames is a spread of 1 degree,
+  // not 8: test_pose_tracker.cc, AMotionOverFramesWithoutAPoseCountsPerFrameInTheNextSpread).
   const double per_frame = 1.0 / static_cast<double>(std::max<uint64_t>(frames_since_prev, 1));
   last_rotation_deg_ = per_frame * AngularDistanceDeg(prev.q, est.cam_from_world.q);
   last_step_m_ = per_frame * (est.cam_from_world.OriginOfTargetInSource() - prev.OriginOfTargetInSource()).norm();

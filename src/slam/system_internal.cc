@@ -44,6 +44,16 @@ double detail::CappedMeanSquarePx2(const std::vector<double>& residuals_px, doub
   return sum / static_cast<double>(residuals_px.size());
 }
 
+void detail::SharedBearings(const FrameRecord& a, const FrameRecord& b, const PinholeCamera& ideal,
+                            std::vector<Eigen::Vector3d>* in_a, std::vector<Eigen::Vector3d>* in_b) {
+  in_a->clear(), in_b->clear();
+  for (const FeatureUndistorted& f : a.features)
+    if (const FeatureUndistorted* g = b.Find(f.id)) {
+      in_a->push_back(ideal.PixelToNormalized(f.uv_px).homogeneous().normalized());
+      in_b->push_back(ideal.PixelToNormalized(g->uv_px).homogeneous().normalized());
+    }
+}
+
 double detail::EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
                                        const Pose& b_from_a) {
   std::vector<double> off;

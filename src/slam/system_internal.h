@@ -7,8 +7,10 @@
 
 #include <Eigen/Core>
 
+#include "core/camera.h"
 #include "core/pose.h"
 #include "geometry/bundle_adjust.h"
+#include "slam/map.h"
 
 namespace mcslam::slam::detail {
 
@@ -44,6 +46,11 @@ double PooledLag1Correlation(const std::vector<std::vector<Eigen::Vector2d>>& se
 // the move is nil.
 double EpipolarDisagreementDeg(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
                                const Pose& b_from_a);
+
+// The unit bearings (through `ideal`, the undistorted pinhole) of the tracks frames a and b share, in a's order:
+// in_a[i] and in_b[i] are one track's.
+void SharedBearings(const FrameRecord& a, const FrameRecord& b, const PinholeCamera& ideal,
+                    std::vector<Eigen::Vector3d>* in_a, std::vector<Eigen::Vector3d>* in_b);
 
 // The mean over `residuals_px` of min(r^2, cap_px^2) (px^2): a window's fit, each wrong match counted at most
 // the cap; infinity for none.

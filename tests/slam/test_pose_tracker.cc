@@ -233,8 +233,8 @@ TEST(PoseTracker, AFrameLostAtTheFirstSpreadIsScoredAgainWider) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
-// After a relocalisation or lost frames the tracker has no rate of turn of its own; the turn the tracks measured
-// (FrameTracker) is the least spread of the first try. An 8-degree roll is out of the first try's reach at the
+// Right after a relocalised frame the tracker has no rate of turn of its own; the turn the tracks measured
+// (FrameTracker::TrackFrame) is the least spread of the first try. An 8-degree roll is out of the first try's reach at the
 // least spread (16 sigma of 0.5 degrees, as in AFrameLostAtTheFirstSpreadIsScoredAgainWider; the second try off
 // here) and within it when the measured turn sets the spread: found without a second try, as a first try finds a
 // pose near its centre (ExactDataGivesAnAccuratePoseAndKeyframe's 0.6 degrees).

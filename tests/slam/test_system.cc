@@ -447,7 +447,7 @@ TEST(System, RelocalisesAfterAJumpFromMatchesAlone) {
   // as its hint, is tracked, and as accurately as the frames before the jump.
   const std::vector<FrameReport> jumped = system.Process(after);
   ASSERT_EQ(jumped.size(), 1u);
-  EXPECT_EQ(jumped[0].status, FrameStatus::kLost) << jumped[0].note << " " << off_m(jumped[0]);
+  EXPECT_EQ(jumped[0].status, FrameStatus::kLost) << jumped[0].note;
   FrameObservations next = in.frames[91];
   const std::optional<Relocalisation> r91 = system.Relocalise(matches_of(next));
   ASSERT_TRUE(r91.has_value());
