@@ -444,6 +444,9 @@ void RegisterRun(CLI::App& app) {
   cmd->add_flag("--no-pose-before-reference{false}", args->system.init.pose_frames_before_reference,
                 "Leave the frames before the initialisation's reference frame (when it moved on while waiting) "
                 "without a pose instead of placing them against the first map");
+  cmd->add_flag("--no-pose-lost-frames{false}", args->system.pose_lost_frames_when_found,
+                "Leave the frames lost before a frame that is tracked again (relocalised, or found from the last pose) "
+                "without a pose instead of placing them against the map through the tracks they share with it");
   cmd->add_flag("--no-self-calibration{false}", args->system.init.self_calibrate,
                 "Keep the camera's distortion as given instead of refining its first radial coefficient from the "
                 "settled first map when the map measures it clearly (docs/self_calibration.md)");

@@ -49,7 +49,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(SystemOptions, pose_method, stru
                                                 rotation_only, rotation_only_min_tracks, rotation_only_min_ratio,
                                                 rotation_only_over_weak_pose, rotation_only_keep_turn_over_a_jump,
                                                 bridge, bridge_join_waits_over_a_jump,
-                                                bridge_wait_placed_by_map_tracks, restart_min_lost_frames)
+                                                bridge_wait_placed_by_map_tracks, restart_min_lost_frames,
+                                                pose_lost_frames_when_found)
 }  // namespace mcslam::slam
 
 namespace mcslam::frontend {

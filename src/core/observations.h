@@ -4,6 +4,7 @@
 // neither includes the other (docs/design.md).
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -24,6 +25,9 @@ struct FrameObservations {
   // cam_from_world found by relocalisation (System::Relocalise) for this frame: the pose step searches
   // around it instead of around the last pose.
   std::optional<Pose> pose_hint;
+  // (track id, map point id): the tracks relocalisation matched to map points by their descriptors, renamed to
+  // those points from this frame on. The frames lost before this one saw them under their track ids.
+  std::vector<std::pair<int64_t, int64_t>> relabelled;
   // The front end measured the frame as blurred (frontend::FrameStats::blurred: its patches less sharp than
   // their birth patches): its features lie less precisely, and the System does not initialise on it.
   bool blurred = false;

@@ -530,6 +530,7 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     if (!inliers.count(point_id) || !frontend_.Relabel(track_id, point_id, lost_descriptors_.at(point_id))) continue;
     for (FeatureObservation& f : obs->features)
       if (f.feature_id == track_id) f.feature_id = point_id;
+    obs->relabelled.emplace_back(track_id, point_id);
     lost_descriptors_.erase(point_id);
   }
   obs->pose_hint = reloc->cam_from_world;

@@ -34,7 +34,7 @@ geometry::PnpOptions SlamState::TrackerPnpOptions(int min_inliers) const {
   return po;
 }
 
-std::optional<Pose> SlamState::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const {
+std::optional<Pose> SlamState::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio, int* inliers_out) const {
   std::vector<Eigen::Vector3d> P;
   std::vector<Eigen::Vector2d> uv;
   for (const FeatureUndistorted& o : map.frames[slot].features)
@@ -43,6 +43,7 @@ std::optional<Pose> SlamState::PlaceByPnp(int slot, int min_inliers, double min_
   int inliers = 0;
   std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &inliers);
   if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
+  if (inliers_out) *inliers_out = inliers;
   return pose;
 }
 

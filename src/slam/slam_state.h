@@ -79,7 +79,8 @@ struct SlamState {
   int StoreAdjustedPoints(const std::vector<Pose>& cams, const WindowPoints& wp, int64_t frame_index);
   // RANSAC PnP as the pose step judges a point: its inlier threshold, this many inliers at least.
   geometry::PnpOptions TrackerPnpOptions(int min_inliers) const;
-  std::optional<Pose> PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio) const;
+  // `inliers` (when given): PnP's inliers of the pose returned.
+  std::optional<Pose> PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio, int* inliers = nullptr) const;
 };
 
 }  // namespace mcslam::slam

@@ -11,6 +11,8 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <unordered_set>
 #include <utility>
 
 #include <fmt/format.h>
@@ -30,6 +32,42 @@ namespace mcslam::slam {
 using detail::Ms;
 
 namespace {
+
+// The frames lost just before `slot`, a frame tracked again (by relocalisation, or by the pose step from the last
+// pose), placed now by PnP against the map, newest first, while each is placed and agrees with the frame after it
+// (Initializer::FollowsFrom). Their features are the same tracks as this frame's: the tracks relocalisation
+// matched to map points (`relabelled`) are renamed to those points in them first. Not keyframes, unsmoothed, and
+// nothing of the map changes; their reports come after this frame's. Rendered fast scenario, seed 2: a jolt of
+// 7.1 deg and 31 cm in a frame lost 41 of 63 tracks at frame 18, and frames 18-25 stayed lost until 17 new tracks
+// matched the map at frame 26; those tracks were followed through frames 19-25.
+void PoseLostFramesBefore(SlamState& s, const Initializer& init, int slot,
+                          const std::vector<std::pair<int64_t, int64_t>>& relabelled, std::vector<FrameReport>* out) {
+  const std::unordered_map<int64_t, int64_t> point_of_track(relabelled.begin(), relabelled.end());
+  const int64_t found = s.map.frames[slot].index;
+  for (int k = slot - 1; k >= std::max(s.pruned_until, 0); --k) {
+    FrameRecord& f = s.map.frames[k];
+    if (f.has_pose || f.features.empty()) break;
+    if (!point_of_track.empty()) {
+      std::unordered_set<int64_t> ids;
+      for (const FeatureUndistorted& o : f.features) ids.insert(o.id);
+      for (FeatureUndistorted& o : f.features)
+        if (const auto it = point_of_track.find(o.id); it != point_of_track.end() && !ids.count(it->second))
+          o.id = it->second;
+    }
+    int inliers = 0;
+    const std::optional<Pose> pose =
+        s.PlaceByPnp(k, s.options.tracker.min_inliers, s.options.tracker.min_inlier_ratio, &inliers);
+    if (!pose || !init.FollowsFrom(k, *pose, k + 1)) break;
+    f.has_pose = true;
+    f.cam_from_world = *pose;
+    FrameReport r = s.PosedReport(k);
+    r.inliers = inliers;
+    r.smoothed_cam_from_world = r.cam_from_world;
+    r.note = fmt::format("lost when it came; posed against the map once frame {} was tracked again", found);
+    r.map_points = s.MapPoints();
+    out->push_back(r);
+  }
+}
 
 // The report of a frame that loses its pose with its map (SystemOptions::restart_min_lost_frames).
 FrameReport DroppedReport(const FrameRecord& f, std::string note) {
@@ -282,6 +320,8 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
     st_->settler.Settle(slot, &out);
     out.front().init_ms = Ms(t0);
   }
+  if (out.front().status == FrameStatus::kTracked && s.options.pose_lost_frames_when_found)
+    PoseLostFramesBefore(s, st_->init, slot, frame.relabelled, &out);
   return out;
 }
 

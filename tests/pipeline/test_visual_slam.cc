@@ -178,6 +178,9 @@ TEST(VisualSlam, AStarvingMapTakesNewPointsFromTwoViewsSoFastMotionDoesNotLoseIt
     // Through descriptors turned about the camera's axis too, seed 2's three-view run is found again sooner
     // (7 frames lost instead of 14; its two-view run loses none either way).
     options.relocalise_turned = false;
+    // And the frames lost stay lost: not placed afterwards once the map is found again (the count is of frames the
+    // map could not pose when they came; SystemOptions::pose_lost_frames_when_found).
+    options.system.pose_lost_frames_when_found = false;
     options.system.mapping.starving_min_track_frames = min_views;
     const Reports reports = RunWhole(scene, options);
     int lost = 0;

@@ -453,12 +453,108 @@ TEST(System, RelocalisesAfterAJumpFromMatchesAlone) {
   ASSERT_TRUE(r91.has_value());
   next.pose_hint = r91->cam_from_world;
   const std::vector<FrameReport> resumed = system.Process(next);
-  ASSERT_EQ(resumed.size(), 1u);
+  // Frame 91's report, then frame 90's: lost when it came, placed against the map through the tracks it shares
+  // with frame 91 once that one was tracked (SystemOptions::pose_lost_frames_when_found).
+  ASSERT_EQ(resumed.size(), 2u);
   EXPECT_EQ(resumed[0].status, FrameStatus::kTracked) << resumed[0].note;
   EXPECT_GT(resumed[0].inliers, 30);
+  EXPECT_EQ(resumed[1].index, 90);
+  EXPECT_EQ(resumed[1].status, FrameStatus::kTracked) << resumed[1].note;
   // The resumed camera is where the truth says, within 1 cm (the paper's scene is ~3 m away; the clean run's
-  // frames are within 1-2 mm).
+  // frames are within 1-2 mm), and so is the frame placed after it.
   EXPECT_LT(off_m(resumed[0]), 0.01);
+  EXPECT_LT(off_m(resumed[1]), 0.01);
+}
+
+// A jolt that loses most tracks: frames 60-64 keep 5 of their map points' tracks (fewer than the pose step
+// scores: lost), the rest of their points are followed as new tracks (new ids), and at frame 65 relocalisation
+// matches those new tracks to their map points (as the pipeline does: the tracks renamed to the points from frame
+// 65 on, FrameObservations::relabelled). Frame 65 is tracked; frames 60-64 are placed after it through the renamed
+// tracks, newest first, each where the truth is. Without the renaming they keep 5 points (PnP needs 8): lost;
+// with pose_lost_frames_when_found off, lost too.
+TEST(System, FramesLostBeforeARelocalisationArePlacedThroughTheTracksItMatched) {
+  const apps::SequenceInput in = Scenario(70, 0.0, 0.0);
+  constexpr int64_t kNewTrack = 1'000'000'000;
+  struct Outcome {
+    std::vector<FrameReport> found;                  // frame 65's reports
+    std::vector<FrameStatus> when_they_came;         // frames 60-64
+    std::vector<Eigen::Vector3d> est_centres, gt_centres;  // frames 0-59 tracked
+  };
+  auto run = [&](bool pose_lost, bool relabel) {
+    SystemOptions o = FastOptions();
+    o.pose_lost_frames_when_found = pose_lost;
+    System system(in.camera, o, compute::MakeCpuPoseKernel(), compute::MakeCpuPointKernel());
+    Outcome out;
+    for (int i = 0; i < 60; ++i)
+      for (const FrameReport& r : system.Process(in.frames[static_cast<size_t>(i)]))
+        if (r.has_pose && r.index < 60) {
+          out.est_centres.push_back(r.cam_from_world.Inverse().t);
+          out.gt_centres.push_back(in.groundtruth.world_from_cam[static_cast<size_t>(r.index)].t);
+        }
+    // The points frame 59 saw as map points: 5 of them keep their tracks, the others are new tracks from frame 60.
+    std::set<int64_t> kept;
+    for (const FeatureObservation& x : in.frames[59].features)
+      if (const MapPoint* p = system.map().Find(x.feature_id); p && p->state != PointState::kRemoved && kept.size() < 5)
+        kept.insert(x.feature_id);
+    auto jolted = [&](int i) {
+      FrameObservations f = in.frames[static_cast<size_t>(i)];
+      for (FeatureObservation& x : f.features)
+        if (!kept.count(x.feature_id)) x.feature_id += kNewTrack;
+      return f;
+    };
+    for (int i = 60; i < 65; ++i) {
+      const std::vector<FrameReport> reports = system.Process(jolted(i));
+      out.when_they_came.push_back(reports.empty() ? FrameStatus::kTracked : reports.front().status);
+    }
+    FrameObservations f65 = jolted(65);
+    std::vector<RelocalisationMatch> matches;
+    for (const FeatureObservation& x : f65.features) {
+      const int64_t point = x.feature_id >= kNewTrack ? x.feature_id - kNewTrack : x.feature_id;
+      if (const MapPoint* p = system.map().Find(point); p && p->state != PointState::kRemoved)
+        matches.push_back({point, x.uv_px});
+    }
+    const std::optional<Relocalisation> reloc = system.Relocalise(matches);
+    if (!reloc) return out;
+    f65.pose_hint = reloc->cam_from_world;
+    for (FeatureObservation& x : f65.features)
+      if (x.feature_id >= kNewTrack && system.map().Find(x.feature_id - kNewTrack)) {
+        if (relabel) f65.relabelled.emplace_back(x.feature_id, x.feature_id - kNewTrack);
+        x.feature_id -= kNewTrack;
+      }
+    out.found = system.Process(f65);
+    return out;
+  };
+
+  const Outcome placed = run(true, true);
+  ASSERT_EQ(placed.when_they_came.size(), 5u);
+  for (FrameStatus st : placed.when_they_came) EXPECT_EQ(st, FrameStatus::kLost);
+  ASSERT_GE(placed.found.size(), 1u);
+  EXPECT_EQ(placed.found[0].index, 65);
+  ASSERT_EQ(placed.found[0].status, FrameStatus::kTracked) << placed.found[0].note;
+  ASSERT_EQ(placed.found.size(), 6u);
+  const eval::Similarity3 s =
+      eval::AlignPositions(placed.est_centres, placed.gt_centres, eval::Alignment::kSim3).gt_world_from_est_world;
+  for (size_t k = 1; k < placed.found.size(); ++k) {
+    const FrameReport& r = placed.found[k];
+    EXPECT_EQ(r.index, static_cast<int64_t>(65 - k));  // newest first
+    EXPECT_EQ(r.status, FrameStatus::kTracked);
+    EXPECT_FALSE(r.keyframe);
+    EXPECT_GE(r.inliers, 30);  // PnP's, of the ~40 map points each frame sees
+    // Clean data: the frames tracked before the jolt are within 1-2 mm of the truth; PnP on ~40 points as well.
+    const double off =
+        (s * r.cam_from_world.Inverse().t - in.groundtruth.world_from_cam[static_cast<size_t>(r.index)].t).norm();
+    EXPECT_LT(off, 0.01) << "frame " << r.index;
+  }
+  // Not renamed: 5 map points in each lost frame, fewer than PnP takes.
+  const Outcome unnamed = run(true, false);
+  ASSERT_GE(unnamed.found.size(), 1u);
+  EXPECT_EQ(unnamed.found[0].status, FrameStatus::kTracked);
+  EXPECT_EQ(unnamed.found.size(), 1u);
+  // Off: only frame 65's report.
+  const Outcome off = run(false, true);
+  ASSERT_GE(off.found.size(), 1u);
+  EXPECT_EQ(off.found[0].status, FrameStatus::kTracked);
+  EXPECT_EQ(off.found.size(), 1u);
 }
 
 // Track ids as a KLT front end gives them: a point that leaves the view and comes back is a new track (only
