@@ -396,12 +396,9 @@ void ImageRun::RunFrames() {
   };
   try {
     io::Frame frame;
-    // The next frame is decoded while this one is worked on (a core the front end and the back end leave idle
-    // part of the time); decode_ms is then what the frame waited for it.
-    io::ReadAhead reader(*data.source);
     while (!Interrupted()) {
       const auto t_frame = Clock::now();
-      if (!reader.Next(&frame)) {
+      if (!data.source->Next(&frame)) {
         source_ended = true;
         break;
       }

@@ -139,35 +139,6 @@ std::optional<cv::Size> ImageListSource::ImageSize() {
   return size_;
 }
 
-ReadAhead::~ReadAhead() {
-  if (!next_.valid()) return;
-  try {
-    next_.get();
-  } catch (...) {  // the frame nobody asked for: its error is nobody's
-  }
-}
-
-void ReadAhead::Start() {
-  next_ = std::async(std::launch::async, [this] {
-    Read r;
-    r.more = source_.Next(&r.frame);
-    return r;
-  });
-}
-
-bool ReadAhead::Next(Frame* frame) {
-  if (ended_) return false;
-  if (!next_.valid()) Start();
-  Read r = next_.get();  // rethrows what the source threw
-  if (!r.more) {
-    ended_ = true;
-    return false;
-  }
-  *frame = std::move(r.frame);
-  Start();
-  return true;
-}
-
 bool ImageListSource::Next(Frame* frame) {
   if (next_ >= paths_.size()) return false;
   const size_t i = next_++;

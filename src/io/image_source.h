@@ -4,7 +4,6 @@
 // handed out too, with an empty image and the reason, so that the caller can skip it and count it (a
 // corrupt file in the middle of a sequence never ends the run and never crashes it).
 #include <cstdint>
-#include <future>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
@@ -36,29 +35,6 @@ class ImageSource {
   virtual std::optional<int64_t> FrameCount() const = 0;
   // Words for messages: "image folder /data/x (120 images)", "video /data/a.mp4", "webcam 0".
   virtual std::string Description() const = 0;
-};
-
-// Reads a source one frame ahead on a thread of its own: while the caller works on frame k, frame k+1 is read
-// and decoded. The frames, their order, their errors and the source's exceptions are the source's own; each frame
-// is a fresh one (no buffer shared with the frame before). The source must not be used otherwise while this lives.
-class ReadAhead {
- public:
-  explicit ReadAhead(ImageSource& source) : source_(source) {}
-  ~ReadAhead();  // waits for the frame being read
-  ReadAhead(const ReadAhead&) = delete;
-  ReadAhead& operator=(const ReadAhead&) = delete;
-  // As ImageSource::Next; the first call reads its frame itself.
-  bool Next(Frame* frame);
-
- private:
-  struct Read {
-    bool more = false;
-    Frame frame;
-  };
-  void Start();
-  ImageSource& source_;
-  std::future<Read> next_;
-  bool ended_ = false;
 };
 
 // ---- image files -------------------------------------------------------------------------------------

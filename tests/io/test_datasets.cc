@@ -615,53 +615,5 @@ TEST(Datasets, CameraTextFiles) {
   EXPECT_THROW(TumColorCamera(4), std::invalid_argument);
 }
 
-
-// ReadAhead hands out what its source hands out, in order, one frame read ahead: the images, the unreadable
-// frame with its error, the end (again and again), and the source's exception at the frame that threw.
-TEST(ReadAhead, GivesTheSourcesFramesInOrderWithTheirErrorsAndItsEnd) {
-  TempDir dir;
-  for (int i = 0; i < 6; ++i) WriteImage((dir.path() / fmt::format("{:03d}.png", i)).string(), {16, 12}, 10 * i);
-  WriteText((dir.path() / "003.png").string(), "not an image");
-  auto direct = OpenImageFolder(dir.path().string());
-  auto ahead_source = OpenImageFolder(dir.path().string());
-  ReadAhead ahead(*ahead_source);
-  Frame a, b;
-  int n = 0;
-  while (direct->Next(&a)) {
-    ASSERT_TRUE(ahead.Next(&b)) << n;
-    EXPECT_EQ(b.index, a.index);
-    EXPECT_EQ(b.name, a.name);
-    EXPECT_EQ(b.stamp_s, a.stamp_s);
-    EXPECT_EQ(b.error, a.error);
-    ASSERT_EQ(b.ok(), a.ok()) << n;
-    if (a.ok()) EXPECT_EQ(cv::norm(a.image, b.image, cv::NORM_INF), 0.0) << n;
-    ++n;
-  }
-  EXPECT_EQ(n, 6);
-  EXPECT_FALSE(ahead.Next(&b));
-  EXPECT_FALSE(ahead.Next(&b));
-
-  // A source that throws at its third frame: the first two come, then the exception, from the Next that asked for it.
-  struct Throwing : ImageSource {
-    int next = 0;
-    bool Next(Frame* f) override {
-      if (next == 2) throw std::runtime_error("device gone");
-      f->index = next++;
-      f->image = cv::Mat(4, 4, CV_8U, cv::Scalar(f->index));
-      return true;
-    }
-    std::optional<cv::Size> ImageSize() override { return cv::Size(4, 4); }
-    std::optional<int64_t> FrameCount() const override { return std::nullopt; }
-    std::string Description() const override { return "throwing"; }
-  } throwing;
-  ReadAhead t(throwing);
-  ASSERT_TRUE(t.Next(&b));
-  EXPECT_EQ(b.index, 0);
-  ASSERT_TRUE(t.Next(&b));
-  EXPECT_EQ(b.index, 1);
-  EXPECT_EQ(b.image.at<uint8_t>(0, 0), 1);
-  ExpectThrowsWith([&] { t.Next(&b); }, "device gone");
-}
-
 }  // namespace
 }  // namespace mcslam::io
