@@ -54,6 +54,16 @@ std::optional<slam::FrameStatus> ReportLog::Put(const slam::FrameReport& r) {
   }
   slam::FrameReport& old = reports[it->second];
   const slam::FrameStatus replaced = old.status;
+  if (r.placed_after_loss) {  // posed late: what the frame cost when it came stands
+    slam::FrameReport placed = r;
+    placed.scored = old.scored;
+    placed.map_points = old.map_points;
+    placed.track_ms = old.track_ms, placed.map_ms = old.map_ms, placed.adjust_ms = old.adjust_ms;
+    placed.init_ms = old.init_ms, placed.adjust_points_ms = old.adjust_points_ms;
+    placed.local_ba_ms = old.local_ba_ms, placed.local_ba_wait_ms = old.local_ba_wait_ms;
+    old = placed;
+    return replaced;
+  }
   if (r.pose_update && old.has_pose) {  // a corrected pose: the rest of the frame's report stands
     old.cam_from_world = r.cam_from_world;
     old.joined |= r.joined;

@@ -26,6 +26,9 @@ struct FrameReport {
   // A later correction of an earlier frame's pose (the settling after initialisation): only cam_from_world
   // (and the residual statistics) replace those of that frame's report; the rest of it stands.
   bool pose_update = false;
+  // Lost when it came, posed later once a frame after it was tracked again (SystemOptions::pose_lost_frames_when_found):
+  // the pose, its residuals, inliers and note replace those of the frame's report; its times and counts stand.
+  bool placed_after_loss = false;
   int scored = 0, inliers = 0;
   // The pose step's best score (the capped reprojection distances summed, px) and the translation spread it sampled
   // with (m): zero when the frame was not posed by the pose step.

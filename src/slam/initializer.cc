@@ -88,17 +88,21 @@ bool Initializer::FollowsFrom(int k, const Pose& k_from_world, int next) const {
   return detail::EpipolarDisagreementDeg(in_k, in_next, fn.cam_from_world * k_from_world.Inverse()) <= limit_deg;
 }
 
-int Initializer::PoseFramesBefore(int before_slot, int first_slot) {
+int Initializer::PoseFramesBefore(int before_slot, int first_slot, const std::function<void(FrameRecord&)>& prepare,
+                                  std::vector<std::pair<int, int>>* placed) {
   int first = before_slot;
   for (int k = before_slot - 1; k >= std::max(first_slot, 0); --k) {
     FrameRecord& f = s_.map.frames[k];
     if (f.has_pose || f.features.empty()) break;
+    if (prepare) prepare(f);
+    int inliers = 0;
     const std::optional<Pose> pose =
-        s_.PlaceByPnp(k, s_.options.tracker.min_inliers, s_.options.tracker.min_inlier_ratio);
+        s_.PlaceByPnp(k, s_.options.tracker.min_inliers, s_.options.tracker.min_inlier_ratio, &inliers);
     if (!pose) break;
     if (!FollowsFrom(k, *pose, k + 1)) break;
     f.has_pose = true;
     f.cam_from_world = *pose;
+    if (placed) placed->emplace_back(k, inliers);
     first = k;
   }
   return first;

@@ -3,9 +3,11 @@
 // frame refined over every frame between them, the depth-reversal ambiguity test, and the frames before the
 // reference placed once the map exists. A map made here settles next (Settler).
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -102,6 +104,15 @@ class Initializer {
   // (nothing to judge by).
   bool FollowsFrom(int k, const Pose& k_from_world, int next) const;
   static constexpr size_t kMinTracksToFollow = 8;
+  // Places frames before_slot-1, before_slot-2, ... (not before first_slot) by PnP against the map while each can
+  // be (the pose step's least inliers and share of the points seen) and follows from the frame after it
+  // (FollowsFrom); the walk ends at a frame already posed or without features. `prepare` (when given) is called on
+  // each frame before it is placed. The ones placed get poses; `placed` (when given) receives each one's slot and
+  // PnP inliers, newest first. Returns the first slot placed (before_slot: none). Used for the frames before the
+  // first map's reference (InitOptions::pose_frames_before_reference) and for frames lost before a frame tracked
+  // again (SystemOptions::pose_lost_frames_when_found).
+  int PoseFramesBefore(int before_slot, int first_slot, const std::function<void(FrameRecord&)>& prepare = {},
+                       std::vector<std::pair<int, int>>* placed = nullptr);
 
  private:
   // The other minima of the two views' cost in the bas-relief valley around `winner` (geometry::RelativePoseMinima,
@@ -114,10 +125,7 @@ class Initializer {
   void MoveStarvedReference(int cur_slot, size_t shared, const InlierSupply& supply, std::vector<FrameReport>* out);
   // How many of frame cur_slot's features frame s saw too.
   int SharedFeatures(int s, int cur_slot) const;
-  // InitOptions::pose_frames_before_reference: places frames before_slot-1, before_slot-2, ... (not before
-  // first_slot) while each can be; the ones placed get poses. Returns the first slot placed (before_slot:
-  // none).
-  int PoseFramesBefore(int before_slot, int first_slot);
+
 
   SlamState& s_;
   Settler& settler_;

@@ -51,6 +51,17 @@ struct FrameRecord {
     return std::lower_bound(features.begin(), features.end(), id,
                             [](const FeatureUndistorted& f, int64_t v) { return f.id < v; });
   }
+  // The observation of track `from` becomes one of point `to` (kept in id order); dropped when the frame already
+  // observes `to`. True when the frame observes `to` through it now.
+  bool Rename(int64_t from, int64_t to) {
+    auto at = LowerBound(from);
+    if (at == features.end() || at->id != from) return false;
+    const Eigen::Vector2d uv = at->uv_px;
+    features.erase(at);
+    if (Find(to)) return false;
+    features.insert(LowerBound(to), {to, uv});
+    return true;
+  }
 };
 
 class Map {

@@ -292,15 +292,8 @@ std::optional<int64_t> Mapper::RevisitedPoint(const FeatureUndistorted& f, const
 }
 
 void Mapper::MergeTrack(int64_t track, int64_t point) {
-  for (size_t i = static_cast<size_t>(s_.pruned_until); i < s_.map.frames.size(); ++i) {  // older ones have no features
-    FrameRecord& fr = s_.map.frames[i];
-    auto at = fr.LowerBound(track);
-    if (at == fr.features.end() || at->id != track) continue;
-    const Eigen::Vector2d uv = at->uv_px;
-    fr.features.erase(at);
-    if (fr.Find(point)) continue;
-    fr.features.insert(fr.LowerBound(point), {point, uv});
-  }
+  for (size_t i = static_cast<size_t>(s_.pruned_until); i < s_.map.frames.size(); ++i)  // older ones have no features
+    s_.map.frames[i].Rename(track, point);
   MapPoint& p = *s_.map.Find(point);
   p.state = PointState::kActive;
   p.inlier = true;

@@ -34,16 +34,16 @@ geometry::PnpOptions SlamState::TrackerPnpOptions(int min_inliers) const {
   return po;
 }
 
-std::optional<Pose> SlamState::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio, int* inliers_out) const {
+std::optional<Pose> SlamState::PlaceByPnp(int slot, int min_inliers, double min_inlier_ratio, int* inliers) const {
   std::vector<Eigen::Vector3d> P;
   std::vector<Eigen::Vector2d> uv;
   for (const FeatureUndistorted& o : map.frames[slot].features)
     if (const MapPoint* p = map.Find(o.id); p && p->state != PointState::kRemoved)
       P.push_back(p->position_in_world), uv.push_back(ideal.PixelToNormalized(o.uv_px));
-  int inliers = 0;
-  std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &inliers);
-  if (pose && inliers < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
-  if (inliers_out) *inliers_out = inliers;
+  int found = 0;
+  std::optional<Pose> pose = geometry::SolvePnp(P, uv, TrackerPnpOptions(min_inliers), &found);
+  if (pose && found < min_inlier_ratio * static_cast<double>(P.size())) return std::nullopt;
+  if (inliers) *inliers = found;
   return pose;
 }
 

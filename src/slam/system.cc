@@ -12,7 +12,6 @@
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <utility>
 
 #include <fmt/format.h>
@@ -33,38 +32,33 @@ using detail::Ms;
 
 namespace {
 
-// The frames lost just before `slot`, a frame tracked again (by relocalisation, or by the pose step from the last
-// pose), placed now by PnP against the map, newest first, while each is placed and agrees with the frame after it
-// (Initializer::FollowsFrom). Their features are the same tracks as this frame's: the tracks relocalisation
-// matched to map points (`relabelled`) are renamed to those points in them first. Not keyframes, unsmoothed, and
-// nothing of the map changes; their reports come after this frame's. Rendered fast scenario, seed 2: a jolt of
-// 7.1 deg and 31 cm in a frame lost 41 of 63 tracks at frame 18, and frames 18-25 stayed lost until 17 new tracks
-// matched the map at frame 26; those tracks were followed through frames 19-25.
-void PoseLostFramesBefore(SlamState& s, const Initializer& init, int slot,
-                          const std::vector<std::pair<int64_t, int64_t>>& relabelled, std::vector<FrameReport>* out) {
-  const std::unordered_map<int64_t, int64_t> point_of_track(relabelled.begin(), relabelled.end());
+// The frames lost just before `slot`, a frame tracked again (relocalised, found by the pose step from the last pose,
+// or by its rotation, or the first one localised in a loaded map), placed now by PnP against the map, newest first,
+// as the frames before the first map's reference are (Initializer::PoseFramesBefore: the pose step's least inliers,
+// and agreement with the frame after it). Their features are the same tracks as this frame's: the tracks that
+// relocalisation matched to map points since the last tracked frame (`renamed`: track id -> point id) are renamed
+// to those points in them first. Not keyframes, not smoothed, no point moves; their reports come after this
+// frame's. Rendered fast scenario, seed 2: a jolt of 7.1 deg and 31 cm in a frame lost 41 of 63 tracks at frame 18,
+// and frames 18-25 stayed lost until 17 new tracks matched the map at frame 26; those tracks were followed through
+// frames 19-25.
+void PoseLostFramesBefore(SlamState& s, Initializer& init, int slot,
+                          const std::unordered_map<int64_t, int64_t>& renamed, std::vector<FrameReport>* out) {
+  const auto rename = [&](FrameRecord& f) {
+    if (renamed.empty()) return;
+    std::vector<std::pair<int64_t, int64_t>> here;  // collected first: a rename moves entries of f.features
+    for (const FeatureUndistorted& o : f.features)
+      if (const auto it = renamed.find(o.id); it != renamed.end()) here.emplace_back(o.id, it->second);
+    for (const auto& [track, point] : here) f.Rename(track, point);
+  };
+  std::vector<std::pair<int, int>> placed;  // slot, PnP inliers
+  init.PoseFramesBefore(slot, s.pruned_until, rename, &placed);
   const int64_t found = s.map.frames[slot].index;
-  for (int k = slot - 1; k >= std::max(s.pruned_until, 0); --k) {
-    FrameRecord& f = s.map.frames[k];
-    if (f.has_pose || f.features.empty()) break;
-    if (!point_of_track.empty()) {
-      std::unordered_set<int64_t> ids;
-      for (const FeatureUndistorted& o : f.features) ids.insert(o.id);
-      for (FeatureUndistorted& o : f.features)
-        if (const auto it = point_of_track.find(o.id); it != point_of_track.end() && !ids.count(it->second))
-          o.id = it->second;
-    }
-    int inliers = 0;
-    const std::optional<Pose> pose =
-        s.PlaceByPnp(k, s.options.tracker.min_inliers, s.options.tracker.min_inlier_ratio, &inliers);
-    if (!pose || !init.FollowsFrom(k, *pose, k + 1)) break;
-    f.has_pose = true;
-    f.cam_from_world = *pose;
+  for (const auto& [k, inliers] : placed) {
     FrameReport r = s.PosedReport(k);
     r.inliers = inliers;
+    r.placed_after_loss = true;
     r.smoothed_cam_from_world = r.cam_from_world;
     r.note = fmt::format("lost when it came; posed against the map once frame {} was tracked again", found);
-    r.map_points = s.MapPoints();
     out->push_back(r);
   }
 }
@@ -98,6 +92,8 @@ struct System::Stages {
   Bridge bridge;
   Mapper mapper;
   FrameTracker tracker;
+  // FrameObservations::relabelled since the last tracked frame: track id -> map point id.
+  std::unordered_map<int64_t, int64_t> renamed_since_tracked;
 };
 
 System::System(const PinholeCamera& camera, const SystemOptions& options,
@@ -320,8 +316,14 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
     st_->settler.Settle(slot, &out);
     out.front().init_ms = Ms(t0);
   }
-  if (out.front().status == FrameStatus::kTracked && s.options.pose_lost_frames_when_found)
-    PoseLostFramesBefore(s, st_->init, slot, frame.relabelled, &out);
+  // The tracks relocalisation renamed are kept until a frame is tracked: the frame relocalised may itself be lost.
+  for (const auto& [track, point] : frame.relabelled) st_->renamed_since_tracked[track] = point;
+  if (out.front().status == FrameStatus::kTracked) {
+    // Not while a provisional map is tracked (its scale is its own, not the map's).
+    if (s.options.pose_lost_frames_when_found && !st_->bridge.active())
+      PoseLostFramesBefore(s, st_->init, slot, st_->renamed_since_tracked, &out);
+    st_->renamed_since_tracked.clear();
+  }
   return out;
 }
 

@@ -293,10 +293,11 @@ struct SystemOptions {
   // with two of every ten frames blurred, seed 1, initialised on frames 1-3 and was lost from frame 4 to its
   // end, 146 of 150 frames.)
   int restart_min_lost_frames = 10;
-  // When a frame is tracked again after frames were lost (a relocalisation, or the pose step from the last pose),
-  // the lost frames just before it are placed by PnP against the map through the tracks they share with it, newest
-  // first, while each agrees with the frame after it; they are reported then (not keyframes; the map is unchanged).
-  // false: they stay lost.
+  // When a frame is tracked again after frames were lost (relocalised, found by the pose step or by its rotation,
+  // or the first one localised in a loaded map; not while a provisional map is tracked), the lost frames just before
+  // it are placed by PnP against the map through the tracks they share with it (those relocalisation matched to map
+  // points renamed to them first), newest first, while each agrees with the frame after it; they are reported then
+  // (FrameReport::placed_after_loss; not keyframes, no point moves). false: they stay lost.
   bool pose_lost_frames_when_found = true;
   void Check() const;
 };
