@@ -293,11 +293,7 @@ void RunFullSlam(const RunArgs& a, const slam::SystemOptions& options) {
   fmt::print("{}\n", line);
   if (Interrupted()) throw InterruptedError();
   if (!res.initialised)
-    throw ExitError(kExitNotInitialised, fmt::format(
-        "the sequence never moved enough to initialise ({} frames; outputs so far written to {}): the features must "
-        "move by a median of {} deg (or {} px that no turn of the camera explains) with enough parallax between two "
-        "frames",
-        res.reports.size(), a.out, options.init.min_median_motion_deg, options.init.min_nonrotational_motion_px));
+    throw NotInitialisedError(options.init, res.reports, static_cast<int64_t>(res.reports.size()), a.out);
 }
 
 void Run(const RunArgs& a) {

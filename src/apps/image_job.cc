@@ -631,14 +631,7 @@ ImageJobSummary ImageRun::Finish() {
                     fmt::format("no frame was relocalised in the map {} ({} frames; outputs written to {}): the run "
                                 "never saw a place of the map as it looked when it was made",
                                 options.load_map_path, frames_processed, out_dir));
-  if (!sum.initialised)
-    throw ExitError(kExitNotInitialised, fmt::format(
-        "the sequence never moved enough to initialise ({} frames; outputs written to {}): the features must move by a "
-        "median of {:.2f} deg (or {:.1f} px that no turn of the camera explains) with a median parallax of {:.1f} deg "
-        "between two frames (last: {})",
-        frames_processed, out_dir, sys_opts.init.min_median_motion_deg, sys_opts.init.min_nonrotational_motion_px,
-        sys_opts.init.min_median_parallax_deg,
-        reports.empty() ? std::string("no frame") : reports.back().note));
+  if (!sum.initialised) throw NotInitialisedError(sys_opts.init, reports, frames_processed, out_dir);
   return sum;
 }
 

@@ -57,7 +57,8 @@ std::string InterruptedMessage();  // "interrupted by SIGTERM (outputs written)"
 // not start from its sequence, and from one that was stopped:
 //   0    done
 //   1    bad input, flags or files, or an error while running: the message on stderr names what
-//   3    the run went through its sequence but never initialised (too little motion); its outputs are written
+//   3    the run went through its sequence but never initialised (too little motion, too few features: the message
+//        says which, NotInitialisedError); its outputs are written
 //   128+signal  stopped by SIGINT (130) or SIGTERM (143); the outputs computed so far are written
 //   100-114     the command line could not be parsed (CLI11's codes, e.g. 105 a value out of range, 109 extras)
 inline constexpr int kExitError = 1;

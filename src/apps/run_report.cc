@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "apps/image_run.h"
+#include "apps/options.h"
 #include "apps/options_json.h"
 #include "core/median.h"
 #include "io/ply.h"
@@ -67,6 +68,21 @@ nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c) {
           {"max_half_share", c.max_half_share},
           {"frames", c.frames}, {"points", c.points},
           {"observations", c.observations}, {"note", c.note}};
+}
+
+ExitError NotInitialisedError(const slam::InitOptions& init, const std::vector<slam::FrameReport>& reports,
+                              int64_t frames, const std::string& out_dir) {
+  const std::string motion_rule = fmt::format(
+      "the features must move by a median of {:.2f} deg, or {:.1f} px that no turn of the camera explains, with a "
+      "median parallax of {:.1f} deg",
+      init.min_median_motion_deg, init.min_nonrotational_motion_px, init.min_median_parallax_deg);
+  const slam::NotInitialisedSummary why = slam::WhyNotInitialised(reports, motion_rule);
+  const std::string head = why.too_little_motion  ? "the sequence never moved enough to initialise"
+                           : why.too_few_features ? "the first map was never made: too few features to track"
+                                                  : "the first map was never made";
+  return ExitError(kExitNotInitialised,
+                   fmt::format("{} ({} frames; outputs written to {}): {}", head, frames, out_dir,
+                               why.text.empty() ? motion_rule : why.text));
 }
 
 ReportCounts CountReports(const std::vector<slam::FrameReport>& reports) {

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "apps/options.h"
 #include "eval/trajectory_eval.h"
 #include "frontend/frontend.h"
 #include "slam/system.h"
@@ -63,6 +64,11 @@ struct ReportCounts {
           guessed_scale = 0;
 };
 ReportCounts CountReports(const std::vector<slam::FrameReport>& reports);
+// The exit of a run that never made its first map (kExitNotInitialised), its message saying what held the waiting
+// frames back (slam::WhyNotInitialised): "the sequence never moved enough to initialise" where too little motion
+// did, "too few features to track" where the scene's texture did.
+[[nodiscard]] ExitError NotInitialisedError(const slam::InitOptions& init, const std::vector<slam::FrameReport>& reports,
+                                            int64_t frames, const std::string& out_dir);
 // Writes them into report.json's object `j` under those names.
 void PutCounts(const ReportCounts& counts, nlohmann::json* j);
 // {"count", "rmse", "mean", "median", "max"}, null where not finite.

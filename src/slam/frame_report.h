@@ -2,6 +2,7 @@
 // The report of one frame that the System returns (and of an earlier frame it revises): status, pose, how it was
 // posed, counts and times.
 #include <cstdint>
+#include <span>
 #include <string>
 
 #include <Eigen/Core>
@@ -12,6 +13,19 @@ namespace mcslam::slam {
 
 enum class FrameStatus { kWaitingForInit, kTracked, kLost };
 const char* ToString(FrameStatus s);
+
+// What kept a frame waiting for the first map (FrameReport::init_wait).
+enum class InitWait {
+  kNone,          // not waiting, or no reason recorded
+  kReference,     // the frame became the reference (the first, or after a restart)
+  kFewShared,     // too few features shared with the reference (the reference moved on): init_count of init_needed
+  kBlurred,       // a blurred frame
+  kMotion,        // the features had not moved enough since the reference
+  kWindow,        // too few frames since the reference
+  kFewInliers,    // too few correspondences fit one two-view motion: init_count of init_needed
+  kGeometry,      // a two-view motion was found but fell short (parallax, points, the window's refinement)
+  kRejected,      // an initialisation was found and rejected (a depth-reversal ambiguity)
+};
 
 struct FrameReport {
   int64_t index = 0;
@@ -56,6 +70,10 @@ struct FrameReport {
   // Waiting: an initialisation was found and rejected in this frame (its note says why: a depth-reversal
   // ambiguity), as opposed to no initialisation being possible yet.
   bool init_rejected = false;
+  // Waiting: what held the first map back in this frame, with the count behind it and the count it needed
+  // (kFewShared: features shared with the reference; kFewInliers: correspondences fitting one two-view motion).
+  InitWait init_wait = InitWait::kNone;
+  int init_count = 0, init_needed = 0;
   // The map was found, while it settled, to be the mirror of the scene in depth and was flipped (note says by
   // how much the mirror explained the settling window better).
   bool depth_reversed = false;
@@ -65,5 +83,15 @@ struct FrameReport {
   bool map_dropped = false;
   bool map_restarted = false;
 };
+
+// Why a run never made its first map, from its frames' reports (the waiting ones count): the reasons by how many
+// frames each held back, with their counts, and what a user can do about the leading one. `motion_rule` describes
+// the motion the initialisation asks for (the options' thresholds in words). Empty when no frame waited.
+struct NotInitialisedSummary {
+  bool too_little_motion = false;  // the motion held most waiting frames back (the camera barely moved)
+  bool too_few_features = false;   // too few features (shared, or fitting one motion) held most back
+  std::string text;
+};
+NotInitialisedSummary WhyNotInitialised(std::span<const FrameReport> reports, const std::string& motion_rule);
 
 }  // namespace mcslam::slam

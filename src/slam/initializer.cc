@@ -475,15 +475,18 @@ void Initializer::MoveStarvedReference(int cur_slot, size_t shared, const Inlier
 bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
   const InitOptions& io = s_.options.init;
   const int cur_slot = static_cast<int>(s_.map.frames.size()) - 1;
-  auto note = [&](std::string s) {
+  auto note = [&](std::string s, InitWait wait, int count = 0, int needed = 0) {
     FrameReport r;
     r.note = std::move(s);
+    r.init_wait = wait;
+    r.init_count = count;
+    r.init_needed = needed;
     out->assign(1, r);
     return false;
   };
   if (s_.reference_slot < 0) {
     s_.reference_slot = cur_slot;
-    return note("reference frame for initialisation");
+    return note("reference frame for initialisation", InitWait::kReference);
   }
   // Correspondences between the reference and this frame. Forward motion (a car) and fast turns lose features
   // quickly: when too few are shared, the reference moves on to the oldest frame since it that still shares
@@ -497,7 +500,9 @@ bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
     }
     const size_t had = c.ids.size();
     s_.reference_slot = next;
-    if (next == cur_slot) return note(fmt::format("only {} features shared with the reference: new reference", had));
+    if (next == cur_slot)
+      return note(fmt::format("only {} features shared with the reference ({} needed): new reference", had, need.common),
+                  InitWait::kFewShared, static_cast<int>(had), need.common);
     c = Correspond(s_.reference_slot, cur_slot);
   }
   const FrameRecord& ref = s_.map.frames[s_.reference_slot];
@@ -505,8 +510,8 @@ bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
   // A blurred frame's corners lie off where the sharp frames see them: the first map, which every later pose
   // builds on, waits for a sharp one (the rendered fast scenario with two of every ten frames blurred, seed 1,
   // initialised on its blurred frame 3 and lost the 23-point map in the next).
-  if (cur.blurred) return note("a blurred frame: the initialisation waits for a sharp one");
-  if (std::optional<std::string> short_of = MotionShort(c)) return note(std::move(*short_of));
+  if (cur.blurred) return note("a blurred frame: the initialisation waits for a sharp one", InitWait::kBlurred);
+  if (std::optional<std::string> short_of = MotionShort(c)) return note(std::move(*short_of), InitWait::kMotion);
 
   // The window: every frame from the reference to this one but the blurred ones (posed after the map is made, below).
   // A blurred frame's corners lie off where the sharp frames see them, in a direction the blur sets, so they bias
@@ -520,14 +525,20 @@ bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
   if (static_cast<int>(window.size()) < io.min_window_frames)
     return note(fmt::format("{} frames since the reference{} (the window needs {}: two views leave the depth "
                             "reversal open)",
-                            window.size(), blurred.empty() ? "" : " not blurred", io.min_window_frames));
+                            window.size(), blurred.empty() ? "" : " not blurred", io.min_window_frames),
+                InitWait::kWindow);
   std::string why;
   bool rejected = false;
   InlierSupply supply;
   std::optional<InitHypothesis> best =
       SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected, &supply);
   if (!best) {
-    note(why);
+    if (rejected)
+      note(why, InitWait::kRejected);
+    else if (supply.found >= 0 && supply.found < supply.needed)
+      note(why, InitWait::kFewInliers, supply.found, supply.needed);
+    else
+      note(why, InitWait::kGeometry);
     out->front().init_rejected = rejected;
     if (supply.found >= 0 && supply.found < supply.needed) MoveStarvedReference(cur_slot, c.ids.size(), supply, out);
     return false;

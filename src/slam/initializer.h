@@ -14,6 +14,7 @@
 
 #include "core/pose.h"
 #include "slam/frame_report.h"
+#include "slam/map.h"
 
 namespace mcslam::slam {
 

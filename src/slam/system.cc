@@ -293,6 +293,11 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
     r.init_ms = Ms(t0);
     r.note = out.empty() ? "waiting for enough motion to initialise" : out.front().note;
     r.init_rejected = !out.empty() && out.front().init_rejected;
+    if (!out.empty()) {
+      r.init_wait = out.front().init_wait;
+      r.init_count = out.front().init_count;
+      r.init_needed = out.front().init_needed;
+    }
     out.assign(1, r);
     return out;
   }

@@ -411,6 +411,21 @@ TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {
   EXPECT_TRUE(std::filesystem::exists(dir / "r/trajectory.txt"));
 }
 
+// A camera that moves as a hand-held one does, in a scene of 8 points: the run never initialises, and its message
+// names the missing features as the cause, not the motion (it said "never moved enough" before).
+TEST(CliRun, SequenceWithTooFewFeaturesSaysSo) {
+  TempDir dir;
+  ASSERT_EQ(RunMcslam("synth --scenario paper --frames 30 --points 8 --out " + dir / "s").exit_code, 0);
+  const auto r = RunMcslam("run " + dir / "s --out " + dir / "r");
+  EXPECT_EQ(r.exit_code, 3) << r.output;  // kExitNotInitialised
+  EXPECT_NE(r.output.find("the first map was never made: too few features to track (30 frames"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("in 29 too few features were shared with the reference frame"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("never moved enough"), std::string::npos) << r.output;
+  EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 31);
+}
+
 TEST(CliRun, BaselineFlagsSelectTheMethodsAndRejectUnknownOnes) {
   TempDir dir;
   ASSERT_EQ(RunMcslam("synth --scenario paper --frames 40 --out " + dir / "s").exit_code, 0);

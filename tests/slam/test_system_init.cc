@@ -4,11 +4,13 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include "core/random.h"
 #include "eval/trajectory_eval.h"
@@ -142,6 +144,101 @@ TEST(System, StaticCameraNeverInitialises) {
   ASSERT_EQ(res.reports.size(), 40u);
   for (const FrameReport& r : res.reports) EXPECT_EQ(r.status, FrameStatus::kWaitingForInit);
   EXPECT_NE(res.reports.back().note.find("feature motion"), std::string::npos) << res.reports.back().note;
+  // Each waiting frame says why in a form a summary can count: the first became the reference, the rest had too
+  // little motion; the summary names that as the cause.
+  EXPECT_EQ(res.reports.front().init_wait, InitWait::kReference);
+  for (size_t k = 1; k < res.reports.size(); ++k) EXPECT_EQ(res.reports[k].init_wait, InitWait::kMotion) << k;
+  const NotInitialisedSummary why = WhyNotInitialised(res.reports, "RULE");
+  EXPECT_TRUE(why.too_little_motion);
+  EXPECT_FALSE(why.too_few_features);
+  EXPECT_NE(why.text.find("in 39 the features had not moved enough since the reference frame (RULE)"),
+            std::string::npos)
+      << why.text;
+}
+
+// A scene with fewer features than a two-view initialisation can use (8 points, of which each frame sees at
+// most 8, against the floor of 12 shared features, InitOptions::min_count_floor): the camera moves as in the
+// paper's scenario, but the frames wait on too few features, and the summary says so rather than blame the motion
+// (it said "the sequence never moved enough" before).
+TEST(System, TooFewFeaturesAreNamedAsWhatHeldTheFirstMapBack) {
+  sim::ScenarioOptions so;
+  so.name = "paper";
+  so.frames = 60;
+  so.num_points = 8;
+  so.seed = 3;
+  const apps::SequenceInput in = apps::KnownMapInputFromSequence(sim::MakeScenario(so));
+  size_t most = 0;
+  for (const FrameObservations& f : in.frames) most = std::max(most, f.features.size());
+  ASSERT_LT(most, static_cast<size_t>(InitOptions{}.min_count_floor));
+  const apps::SlamRunResult res = RunSystem(in, /*gt_scale=*/false);
+  ASSERT_FALSE(res.initialised);
+  int few_shared = 0;
+  int most_shared = -1;
+  for (const FrameReport& r : res.reports) {
+    EXPECT_EQ(r.status, FrameStatus::kWaitingForInit);
+    if (r.init_wait != InitWait::kFewShared) continue;
+    ++few_shared;
+    most_shared = std::max(most_shared, r.init_count);
+    EXPECT_EQ(r.init_needed, InitOptions{}.min_count_floor) << r.index;
+    EXPECT_LT(r.init_count, r.init_needed) << r.index;
+  }
+  EXPECT_EQ(few_shared, 59);  // every frame but the first, which became the reference
+  EXPECT_LE(most_shared, static_cast<int>(most));
+  const NotInitialisedSummary why = WhyNotInitialised(res.reports, "RULE");
+  EXPECT_TRUE(why.too_few_features) << why.text;
+  EXPECT_FALSE(why.too_little_motion) << why.text;
+  EXPECT_NE(why.text.find(fmt::format("in 59 too few features were shared with the reference frame (at most {}, 12 "
+                                      "needed)",
+                                      most_shared)),
+            std::string::npos)
+      << why.text;
+  EXPECT_EQ(why.text.find("RULE"), std::string::npos) << why.text;  // the motion rule is not quoted: not the cause
+}
+
+// The summary's ranking, on reports made by hand: the cause that held the most frames back leads; too few
+// features (shared, or fitting one motion, counted together) against too little motion; another reason that held
+// more frames back than either (rejections) takes the advice; no waiting frame, no summary.
+TEST(WhyNotInitialised, TheReasonThatHeldMostFramesBackLeads) {
+  auto waiting = [](InitWait w, int count = 0, int needed = 0) {
+    FrameReport r;
+    r.init_wait = w;
+    r.init_count = count;
+    r.init_needed = needed;
+    return r;
+  };
+  std::vector<FrameReport> reports = {waiting(InitWait::kReference)};
+  for (int k = 0; k < 5; ++k) reports.push_back(waiting(InitWait::kMotion));
+  for (int k = 0; k < 3; ++k) reports.push_back(waiting(InitWait::kFewShared, 9 + k, 12));
+  for (int k = 0; k < 3; ++k) reports.push_back(waiting(InitWait::kFewInliers, 13, 15));
+  NotInitialisedSummary why = WhyNotInitialised(reports, "RULE");
+  EXPECT_TRUE(why.too_few_features);  // 6 frames against the motion's 5
+  EXPECT_FALSE(why.too_little_motion);
+  EXPECT_EQ(why.text.find("of the 12 frames waiting for the first map, in 5 the features had not moved enough since "
+                          "the reference frame (RULE), in 3 too few features were shared with the reference frame (at "
+                          "most 11, 12 needed), in 3 too few correspondences fit one motion between two views (at "
+                          "most 13, 15 needed) and 1 became the reference frame. The scene offers too few features"),
+            0u)
+      << why.text;
+  reports.push_back(waiting(InitWait::kMotion));
+  reports.push_back(waiting(InitWait::kMotion));
+  why = WhyNotInitialised(reports, "RULE");  // 7 against 6
+  EXPECT_TRUE(why.too_little_motion);
+  EXPECT_FALSE(why.too_few_features);
+  EXPECT_NE(why.text.find("Move the camera sideways"), std::string::npos) << why.text;
+  for (int k = 0; k < 8; ++k) reports.push_back(waiting(InitWait::kRejected));
+  why = WhyNotInitialised(reports, "RULE");  // 8 rejections lead
+  EXPECT_FALSE(why.too_little_motion);
+  EXPECT_FALSE(why.too_few_features);
+  EXPECT_NE(why.text.find("of the 22 frames waiting for the first map, in 8 an initialisation was found and rejected"),
+            std::string::npos)
+      << why.text;
+  EXPECT_NE(why.text.find("need a wider sideways move"), std::string::npos) << why.text;
+  // Tracked frames and frames with no reason recorded are not counted.
+  std::vector<FrameReport> none = {FrameReport{}};
+  none.front().status = FrameStatus::kTracked;
+  none.front().init_wait = InitWait::kMotion;
+  none.push_back(FrameReport{});
+  EXPECT_TRUE(WhyNotInitialised(none, "RULE").text.empty());
 }
 
 // Points on one plane (a table top under the box's place), seen by the scenario's moving camera: the essential
