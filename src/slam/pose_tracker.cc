@@ -193,6 +193,29 @@ double PoseTracker::TypicalResidualPx() {
   return UpperMedianInPlace(&scratch_);
 }
 
+bool PoseTracker::ScoreWideThenFine(const Pose& prev, const Eigen::Vector3d& m, double wide_sigma_rot_deg,
+                                    double fine_sigma_rot_deg, double prior_sigma_m,
+                                    const std::vector<PointObservation>& obs, PoseEstimate* est,
+                                    std::vector<double>* residuals, std::vector<uint8_t>* inliers) {
+  if (!Score(prev, m, wide_sigma_rot_deg, obs, est, residuals, inliers)) return false;
+  est->lost_reason = options_.LostReason(est->inliers, ScoringInliers(obs, *inliers), est->scored);
+  if (!est->lost_reason.empty()) return true;
+  PoseEstimate fine = *est;
+  std::vector<double> fine_residuals;
+  std::vector<uint8_t> fine_inliers;
+  const Eigen::Vector3d fine_dt = LinearisedTranslation(est->cam_from_world, obs, prior_sigma_m);
+  fine.sigma_t = (options_.sigma_trans_scale * fine_dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+  if (Score(est->cam_from_world, m, fine_sigma_rot_deg, obs, &fine, &fine_residuals, &fine_inliers) &&
+      fine.score <= est->score &&
+      options_.LostReason(fine.inliers, ScoringInliers(obs, fine_inliers), fine.scored).empty()) {
+    fine.sigma_t = est->sigma_t;
+    *est = fine;
+    *residuals = std::move(fine_residuals);
+    *inliers = std::move(fine_inliers);
+  }
+  return true;
+}
+
 PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObservation>& obs, uint64_t frame_index,
                                 std::vector<double>* residuals, std::vector<uint8_t>* inliers,
                                 uint64_t frames_since_prev, double min_sigma_rot_deg) {
@@ -230,10 +253,23 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   const double prior_sigma_m = TranslationPriorSigma(frame_index);
   const Eigen::Vector3d dt = LinearisedTranslation(prev, obs, prior_sigma_m);
   est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
-  const double sigma_rot_deg = std::max(
-      {options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg, min_sigma_rot_deg});
+  const double usual_sigma_rot_deg =
+      std::max(options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg);
+  const double sigma_rot_deg = std::max(usual_sigma_rot_deg, min_sigma_rot_deg);  // the second try's base
   if (options_.random == RandomMode::kFresh) table_.Fill(options_.seed, /*stream=*/1, frame_index + 1);
-  if (!Score(prev, m, sigma_rot_deg, obs, &est, residuals, inliers)) return est;
+  if (!Score(prev, m, usual_sigma_rot_deg, obs, &est, residuals, inliers)) return est;
+  if (min_sigma_rot_deg > usual_sigma_rot_deg) {  // the tracks' turn, searched too (Track's comment)
+    PoseEstimate turned = est;
+    std::vector<double> turned_residuals;
+    std::vector<uint8_t> turned_inliers;
+    if (ScoreWideThenFine(prev, m, min_sigma_rot_deg, usual_sigma_rot_deg, prior_sigma_m, obs, &turned,
+                          &turned_residuals, &turned_inliers) &&
+        turned.lost_reason.empty() && turned.score < est.score) {
+      est = turned;
+      *residuals = std::move(turned_residuals);
+      *inliers = std::move(turned_inliers);
+    }
+  }
   est.lost_reason = options_.LostReason(est.inliers, ScoringInliers(obs, *inliers), est.scored);
   // After frames the tracker did not pose (skipped, unreadable, lost), the camera may be anywhere: the first try's
   // pose is checked as a second try's is (a pose near the old one that a little over half of the stale tracks
@@ -251,23 +287,11 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
     PoseEstimate wide = est;
     std::vector<double> wide_residuals;
     std::vector<uint8_t> wide_inliers;
-    if (Score(prev, m, options_.retry_rot_scale * sigma_rot_deg, obs, &wide, &wide_residuals, &wide_inliers) &&
-        (wide.lost_reason = options_.LostReason(wide.inliers, ScoringInliers(obs, wide_inliers), wide.scored)).empty()) {
-      // Refine about the wide winner at the normal spread (its centre is one of the hypotheses, so the score
-      // can only improve); then the residual check (PoseTrackerOptions::retry_max_residual_ratio).
-      PoseEstimate fine = wide;
-      std::vector<double> fine_residuals;
-      std::vector<uint8_t> fine_inliers;
-      const Eigen::Vector3d fine_dt = LinearisedTranslation(wide.cam_from_world, obs, prior_sigma_m);
-      fine.sigma_t = (options_.sigma_trans_scale * fine_dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
-      if (Score(wide.cam_from_world, m, sigma_rot_deg, obs, &fine, &fine_residuals, &fine_inliers) &&
-          fine.score <= wide.score &&
-          options_.LostReason(fine.inliers, ScoringInliers(obs, fine_inliers), fine.scored).empty()) {
-        fine.sigma_t = wide.sigma_t;
-        wide = fine;
-        wide_residuals = std::move(fine_residuals);
-        wide_inliers = std::move(fine_inliers);
-      }
+    // Refined about the wide winner at the normal spread; then the residual check
+    // (PoseTrackerOptions::retry_max_residual_ratio).
+    if (ScoreWideThenFine(prev, m, options_.retry_rot_scale * sigma_rot_deg, sigma_rot_deg, prior_sigma_m, obs, &wide,
+                          &wide_residuals, &wide_inliers) &&
+        wide.lost_reason.empty()) {
       const double recent = TypicalResidualPx();
       if (options_.retry_max_residual_ratio > 0 && wide.median_inlier_residual_px > FitLimitPx(recent)) {
         est.lost_reason += fmt::format(
