@@ -127,7 +127,6 @@ class Initializer {
   // How many of frame cur_slot's features frame s saw too.
   int SharedFeatures(int s, int cur_slot) const;
 
-
   SlamState& s_;
   Settler& settler_;
 };
