@@ -533,14 +533,15 @@ bool Initializer::TryInitialise(std::vector<FrameReport>* out) {
   std::optional<InitHypothesis> best =
       SolveInitWindow(window, c.n1, c.n2, c.ids, need.inliers, need.points, &why, &rejected, &supply);
   if (!best) {
+    const bool starved = supply.found >= 0 && supply.found < supply.needed;  // too few inliers for any solution
     if (rejected)
       note(why, InitWait::kRejected);
-    else if (supply.found >= 0 && supply.found < supply.needed)
+    else if (starved)
       note(why, InitWait::kFewInliers, supply.found, supply.needed);
     else
       note(why, InitWait::kGeometry);
     out->front().init_rejected = rejected;
-    if (supply.found >= 0 && supply.found < supply.needed) MoveStarvedReference(cur_slot, c.ids.size(), supply, out);
+    if (starved) MoveStarvedReference(cur_slot, c.ids.size(), supply, out);
     return false;
   }
 

@@ -193,6 +193,12 @@ double PoseTracker::TypicalResidualPx() {
   return UpperMedianInPlace(&scratch_);
 }
 
+Eigen::Vector3d PoseTracker::TranslationSpread(const Pose& about, const std::vector<PointObservation>& obs,
+                                               double prior_sigma_m) const {
+  const Eigen::Vector3d dt = LinearisedTranslation(about, obs, prior_sigma_m);
+  return (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+}
+
 bool PoseTracker::ScoreWideThenFine(const Pose& prev, const Eigen::Vector3d& m, double wide_sigma_rot_deg,
                                     double fine_sigma_rot_deg, double prior_sigma_m,
                                     const std::vector<PointObservation>& obs, PoseEstimate* est,
@@ -203,8 +209,7 @@ bool PoseTracker::ScoreWideThenFine(const Pose& prev, const Eigen::Vector3d& m, 
   PoseEstimate fine = *est;
   std::vector<double> fine_residuals;
   std::vector<uint8_t> fine_inliers;
-  const Eigen::Vector3d fine_dt = LinearisedTranslation(est->cam_from_world, obs, prior_sigma_m);
-  fine.sigma_t = (options_.sigma_trans_scale * fine_dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+  fine.sigma_t = TranslationSpread(est->cam_from_world, obs, prior_sigma_m);
   if (Score(est->cam_from_world, m, fine_sigma_rot_deg, obs, &fine, &fine_residuals, &fine_inliers) &&
       fine.score <= est->score &&
       options_.LostReason(fine.inliers, ScoringInliers(obs, fine_inliers), fine.scored).empty()) {
@@ -251,8 +256,7 @@ PoseEstimate PoseTracker::Track(const Pose& prev, const std::vector<PointObserva
   }
 
   const double prior_sigma_m = TranslationPriorSigma(frame_index);
-  const Eigen::Vector3d dt = LinearisedTranslation(prev, obs, prior_sigma_m);
-  est.sigma_t = (options_.sigma_trans_scale * dt.cwiseAbs()).array() + options_.sigma_trans_floor_m;
+  est.sigma_t = TranslationSpread(prev, obs, prior_sigma_m);
   const double usual_sigma_rot_deg =
       std::max(options_.sigma_rot_deg, options_.sigma_rot_motion_scale * recent_rotation_deg);
   const double sigma_rot_deg = std::max(usual_sigma_rot_deg, min_sigma_rot_deg);  // the second try's base

@@ -155,6 +155,10 @@ class PoseTracker {
   // Score at the wide spread about prev, then, where that pose is tracked (est->lost_reason empty), once more at
   // the fine spread about its winner (the winner is one of those hypotheses, so the score can only improve), kept
   // where it does and the pose stays tracked; est->sigma_t stays the wide search's. False when Score is.
+  // The translation spread of a search about `about`: sigma_trans_scale times the linearised translation's size
+  // per axis, plus the floor.
+  Eigen::Vector3d TranslationSpread(const Pose& about, const std::vector<PointObservation>& obs,
+                                    double prior_sigma_m) const;
   bool ScoreWideThenFine(const Pose& prev, const Eigen::Vector3d& m, double wide_sigma_rot_deg,
                          double fine_sigma_rot_deg, double prior_sigma_m, const std::vector<PointObservation>& obs,
                          PoseEstimate* est, std::vector<double>* residuals, std::vector<uint8_t>* inliers);

@@ -286,18 +286,13 @@ std::vector<FrameReport> System::ProcessFrame(const FrameObservations& frame) {
   if (!s.initialised) {
     const auto t0 = std::chrono::steady_clock::now();
     if (st_->init.TryInitialise(&out)) return out;
-    FrameReport r;
+    // The initialiser's waiting report (its note, why it waited, a rejection) with this frame's own fields.
+    FrameReport r = out.empty() ? FrameReport{} : out.front();
     r.index = frame.index;
     r.stamp_s = frame.stamp_s;
     r.status = FrameStatus::kWaitingForInit;
     r.init_ms = Ms(t0);
-    r.note = out.empty() ? "waiting for enough motion to initialise" : out.front().note;
-    r.init_rejected = !out.empty() && out.front().init_rejected;
-    if (!out.empty()) {
-      r.init_wait = out.front().init_wait;
-      r.init_count = out.front().init_count;
-      r.init_needed = out.front().init_needed;
-    }
+    if (out.empty()) r.note = "waiting for enough motion to initialise";
     out.assign(1, r);
     return out;
   }
