@@ -32,7 +32,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(InitOptions, min_median_motion_d
                                                 method, ransac_threshold_px, refine_window, refine_huber_px,
                                                 settle_parallax_deg, settle_step, settle_max_frames,
                                                 pose_frames_before_reference, self_calibrate, calibration_min_z,
-                                                calibration_min_shift_px, calibration_min_half_share)
+                                                calibration_min_shift_px, calibration_min_half_share,
+                                                calibration_min_half_z)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE_WITH_DEFAULT(MappingOptions, min_track_frames, min_parallax_deg,
                                                 max_relative_depth_noise, max_noise_parallax_deg, starving_inliers,
                                                 starving_min_track_frames,

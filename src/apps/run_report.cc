@@ -65,7 +65,7 @@ nlohmann::json SelfCalibrationJson(const slam::SelfCalibration& c) {
           {"k1_measured", c.k1_measured},   {"sigma_k1", c.sigma_k1}, {"z", c.z},
           {"corner_shift_px", c.corner_shift_px}, {"k1_halves", {c.k1_half[0], c.k1_half[1]}},
           {"sigma_k1_halves", {c.sigma_k1_half[0], c.sigma_k1_half[1]}}, {"min_half_share", c.min_half_share},
-          {"max_half_share", c.max_half_share},
+          {"max_half_share", c.max_half_share}, {"min_half_z", c.min_half_z},
           {"frames", c.frames}, {"points", c.points},
           {"observations", c.observations}, {"note", c.note}};
 }

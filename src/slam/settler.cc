@@ -24,7 +24,7 @@ bool SelfCalibrationIsTaken(const SelfCalibration& c, const InitOptions& io) {
   // At calibration_min_half_share 0 only the halves' direction is tested (no bound on their size).
   return std::isfinite(c.z) && std::isfinite(c.corner_shift_px) && c.z >= io.calibration_min_z &&
          c.corner_shift_px >= io.calibration_min_shift_px && c.min_half_share >= io.calibration_min_half_share &&
-         c.max_half_share * io.calibration_min_half_share <= 1.0;
+         c.max_half_share * io.calibration_min_half_share <= 1.0 && c.min_half_z >= io.calibration_min_half_z;
 }
 
 using detail::CappedMeanSquarePx2;
@@ -253,6 +253,7 @@ bool Settler::SelfCalibrate(const std::vector<int>& window, const std::vector<Po
     c.k1_half[half] = fit_half[half].camera.dist.k1;
     c.sigma_k1_half[half] = fit_half[half].sigma_k1;
   }
+  c.min_half_z = std::sqrt(std::min(fit_half[0].chi2, fit_half[1].chi2));
   c.frames = static_cast<int>(sub_cams.size());
   c.points = static_cast<int>(X.size());
   c.observations = fit.observations;
@@ -271,10 +272,10 @@ bool Settler::SelfCalibrate(const std::vector<int>& window, const std::vector<Po
   c.accepted = SelfCalibrationIsTaken(c, io);
   c.note = fmt::format("lens distortion k1 {} from {} frames, {} points: {:.4f} +- {:.4f} ({:.1f} sigma, {:.1f} px at "
                        "the farthest corner; halves of the points {:.4f} +- {:.4f} and {:.4f} +- {:.4f}, the "
-                       "smaller {:.2f} and the larger {:.2f} of the change): {}",
+                       "smaller {:.2f} and the larger {:.2f} of the change, the weaker at {:.1f} sigma): {}",
                        c.accepted ? "self-calibrated" : "checked", c.frames, c.points, c.k1_measured, c.sigma_k1, c.z,
                        c.corner_shift_px, c.k1_half[0], c.sigma_k1_half[0], c.k1_half[1], c.sigma_k1_half[1], c.min_half_share,
-                       c.max_half_share,
+                       c.max_half_share, c.min_half_z,
                        c.accepted ? fmt::format("k1 {:g} -> {:.4f}", c.k1_given, c.k1_measured)
                                   : fmt::format("k1 {:g} kept", c.k1_given));
   if (!c.accepted) return false;

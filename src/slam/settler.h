@@ -27,13 +27,15 @@ struct SelfCalibration {
   double k1_half[2] = {0, 0}, sigma_k1_half[2] = {0, 0};  // the same fit on each half of the points (alternate)
   double min_half_share = 0;   // the smaller of the halves' changes of k1 over the whole's (negative: opposite)
   double max_half_share = 0;   // the larger
+  double min_half_z = 0;       // the smaller of the halves' own likelihood ratios, in standard deviations (0: the
+                               // half's k1-free fit did not lower its cost)
   int frames = 0, points = 0, observations = 0;
   std::string note;            // one line: what was measured and what was done
 };
 
 // Whether a measured k1 replaces the camera's (InitOptions::calibration_min_z, calibration_min_shift_px,
-// calibration_min_half_share): significant, material, and repeated by each half of the points within a factor of
-// 1 / calibration_min_half_share of the whole's change, either way.
+// calibration_min_half_share, calibration_min_half_z): significant, material, and repeated by each half of the
+// points, significantly, within a factor of 1 / calibration_min_half_share of the whole's change, either way.
 bool SelfCalibrationIsTaken(const SelfCalibration& c, const InitOptions& io);
 
 class Settler {

@@ -53,6 +53,8 @@ void InitOptions::Check() const {
     Fail(fmt::format("init: calibration_min_shift_px must be >= 0, got {}", calibration_min_shift_px));
   if (!(calibration_min_half_share >= 0 && calibration_min_half_share <= 1))
     Fail(fmt::format("init: calibration_min_half_share must be in [0, 1], got {}", calibration_min_half_share));
+  if (!(calibration_min_half_z >= 0))
+    Fail(fmt::format("init: calibration_min_half_z must be >= 0, got {}", calibration_min_half_z));
 }
 
 void MappingOptions::Check() const {

@@ -813,6 +813,7 @@ TEST(SystemOptions, CheckNamesTheField) {
       {"calibration_min_z", [](SystemOptions& x) { x.init.calibration_min_z = std::nan(""); }},
       {"calibration_min_shift_px", [](SystemOptions& x) { x.init.calibration_min_shift_px = -1; }},
       {"calibration_min_half_share", [](SystemOptions& x) { x.init.calibration_min_half_share = 1.5; }},
+      {"calibration_min_half_z", [](SystemOptions& x) { x.init.calibration_min_half_z = -1; }},
       {"local_ba_function_tolerance", [](SystemOptions& x) { x.mapping.local_ba_function_tolerance = -1e-3; }}};
   for (const auto& [field, spoil] : calibration) {
     o = {};
