@@ -95,6 +95,8 @@ ReportCounts CountReports(const std::vector<slam::FrameReport>& reports) {
     c.rotation_only += r.rotation_only;
     c.provisional += r.provisional;
     c.guessed_scale += r.guessed_scale();
+    if (r.status == slam::FrameStatus::kWaitingForInit && r.init_wait != slam::InitWait::kNone)
+      ++c.waiting_for_init[static_cast<size_t>(r.init_wait)];
   }
   return c;
 }
@@ -107,6 +109,11 @@ void PutCounts(const ReportCounts& c, nlohmann::json* j) {
   (*j)["rotation_only"] = c.rotation_only;  // of the tracked: posed by their turn about the last centre
   (*j)["provisional"] = c.provisional;      // of the tracked: posed in a provisional map (a bridge over the unmapped)
   (*j)["guessed_scale"] = c.guessed_scale;  // of those: its provisional map never joined the map, its scale a guess
+  // The frames waiting for a map, by what held each back (frames.csv's note says it per frame).
+  nlohmann::json waiting = nlohmann::json::object();
+  for (int k = 1; k < slam::kInitWaitReasons; ++k)
+    waiting[slam::InitWaitName(static_cast<slam::InitWait>(k))] = c.waiting_for_init[static_cast<size_t>(k)];
+  (*j)["waiting_for_init"] = waiting;
 }
 
 nlohmann::json StatsJson(const eval::ErrorStats& s) {

@@ -1,5 +1,6 @@
 #pragma once
 // The per-frame rows of a run and how they are written: frames.csv, and the helpers of report.json.
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -59,9 +60,12 @@ std::string StageTable(const std::vector<std::pair<std::string, Stage>>& stages,
 // report.json's per-frame counts, the same in every mode: frames tracked, lost, before the map, keyframes, and of
 // the tracked those posed by a turn about the last centre (rotation_only), in a provisional map (provisional), and
 // in one that never joined the map (guessed_scale: FrameReport::guessed_scale).
+// waiting_for_init: the frames before the first map (or after a restart) by what held each back
+// (slam::InitWait, named by slam::InitWaitName; kNone not counted).
 struct ReportCounts {
   int64_t tracked = 0, lost = 0, not_initialised = 0, keyframes = 0, rotation_only = 0, provisional = 0,
           guessed_scale = 0;
+  std::array<int64_t, slam::kInitWaitReasons> waiting_for_init{};
 };
 ReportCounts CountReports(const std::vector<slam::FrameReport>& reports);
 // The exit of a run that never made its first map (kExitNotInitialised), its message saying what held the waiting

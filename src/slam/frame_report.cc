@@ -9,8 +9,23 @@
 
 namespace mcslam::slam {
 
+const char* InitWaitName(InitWait w) {
+  switch (w) {
+    case InitWait::kNone: return "none";
+    case InitWait::kReference: return "reference";
+    case InitWait::kFewShared: return "few_shared";
+    case InitWait::kBlurred: return "blurred";
+    case InitWait::kMotion: return "motion";
+    case InitWait::kWindow: return "window";
+    case InitWait::kFewInliers: return "few_inliers";
+    case InitWait::kGeometry: return "geometry";
+    case InitWait::kRejected: return "rejected";
+  }
+  return "none";
+}
+
 NotInitialisedSummary WhyNotInitialised(std::span<const FrameReport> reports, const std::string& motion_rule) {
-  constexpr size_t kReasons = static_cast<size_t>(InitWait::kRejected) + 1;
+  constexpr size_t kReasons = kInitWaitReasons;
   struct Tally {
     int frames = 0;
     int most = -1, needed = 0;  // the largest count seen and what that frame needed

@@ -429,6 +429,11 @@ TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {
   EXPECT_NE(r.output.find("never moved enough to initialise"), std::string::npos) << r.output;
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 31);  // every frame reported, as waiting
   EXPECT_TRUE(std::filesystem::exists(dir / "r/trajectory.txt"));
+  // report.json counts the waiting frames by what held each back: every one but the reference by the motion.
+  const nlohmann::json j = testing::ReadJson(dir / "r/report.json");
+  const nlohmann::json& w = j["waiting_for_init"];
+  EXPECT_EQ(w["reference"].get<int>(), 1) << w.dump();
+  EXPECT_EQ(w["motion"].get<int>(), j["not_initialised"].get<int>() - 1) << w.dump();
 }
 
 // A camera that moves as a hand-held one does, in a scene of 8 points: the run never initialises, and its message
@@ -444,6 +449,9 @@ TEST(CliRun, SequenceWithTooFewFeaturesSaysSo) {
       << r.output;
   EXPECT_EQ(r.output.find("never moved enough"), std::string::npos) << r.output;
   EXPECT_EQ(CountDataLines(dir / "r/frames.csv"), 31);
+  const nlohmann::json w = testing::ReadJson(dir / "r/report.json")["waiting_for_init"];
+  EXPECT_EQ(w["few_shared"].get<int>(), 29) << w.dump();
+  EXPECT_EQ(w["motion"].get<int>(), 0) << w.dump();
 }
 
 TEST(CliRun, BaselineFlagsSelectTheMethodsAndRejectUnknownOnes) {
