@@ -84,14 +84,14 @@ struct FrameReport {
   bool map_restarted = false;
 };
 
-// Why a run never made its first map, from its frames' reports (the waiting ones count): the reasons by how many
-// frames each held back, with their counts, and what a user can do about the leading one. `motion_rule` describes
-// the motion the initialisation asks for (the options' thresholds in words). Empty when no frame waited.
 // The reason's name in report.json's waiting_for_init ("reference", "few_shared", "blurred", "motion", "window",
 // "few_inliers", "geometry", "rejected"; "none" for kNone).
 const char* InitWaitName(InitWait w);
 inline constexpr int kInitWaitReasons = static_cast<int>(InitWait::kRejected) + 1;
 
+// Why a run never made its first map, from its frames' reports (the waiting ones count): the reasons by how many
+// frames each held back, with their counts, and what a user can do about the leading one. `motion_rule` describes
+// the motion the initialisation asks for (the options' thresholds in words). Empty when no frame waited.
 struct NotInitialisedSummary {
   bool too_little_motion = false;  // the motion held most waiting frames back (the camera barely moved)
   bool too_few_features = false;   // too few features (shared, or fitting one motion) held most back
