@@ -63,7 +63,11 @@ class Settler {
   // adjusted fit counted too); when the mirror explains the window clearly better (InitOptions::ambiguity_chi2
   // and kFlipCostRatio), *cams and wp->X become the mirror's (in the world frame, the first camera where it was)
   // and *why says so.
-  bool FlipIfMirrored(const std::vector<int>& window, std::vector<Pose>* cams, WindowPoints* wp, std::string* why) const;
+  // A lead must be confirmed: the step before it found the mirror ahead too, by less (a mirror that is the scene
+  // pulls away as the window's parallax grows; a lead that noise gives one of two near-equal fits does not); one
+  // first found at the settling's `last` step (no later one to confirm it) is taken.
+  bool FlipIfMirrored(const std::vector<int>& window, bool last, std::vector<Pose>* cams, WindowPoints* wp,
+                      std::string* why);
   static constexpr int kFlipCheckFrames = 20;
   static constexpr double kFlipCostRatio = 1.6;  // the map's cost over its mirror's needed to flip (and chi-square)
   // InitOptions::self_calibrate, on the settling's last window after its adjustment (cams, wp.X: adjusted): true
@@ -77,6 +81,7 @@ class Settler {
   double next_settle_parallax_deg_ = 0;
   int init_slot_ = -1;          // the frame the initialisation ended on
   double init_baseline_ = 1.0;  // its distance from the reference camera: the scale, kept by every settling
+  double mirror_lead_ = 0;       // the mirror's lead (the map's cost over its mirror's) at the last step, 0: none
   int init_min_points_ = 0;     // the point count the initialisation asked for (InitOptions::min_points, lowered)
   SelfCalibration self_calibration_;
 };

@@ -381,15 +381,18 @@ TEST(CliRun, AFisheyeCameraFileIsFollowed) {
 // residual 0.019 px^2 against the map's 0.041, a chi-square of 177 over its 149 tracks, judged on 20 of those
 // frames): the map is flipped, said in the log and in report.json. Measured, 50 frames: without the flip the
 // orientations end 127 deg (seed 3: 166) off and the map is mirrored; with it 1.65 deg (seed 3: 1.69). Bound
-// 10 deg: 6x the flipped runs, a tenth of the mirrored ones.
+// 10 deg: 6x the flipped runs, a tenth of the mirrored ones. The mirror's lead is taken when the next settling step
+// confirms it grown (AVX2, seed 1: 2.3x at frame 44, 7.7x at 49, flipped there): 70 frames leave room for it.
 TEST(CliRun, AMapMadeOnTheMirrorOfTheSceneIsFlippedWhenTheFramesAfterItTell) {
+  constexpr int kFrames = 70;
   // Both seeds made their maps mirrored here; which frames the first try takes can differ on another CPU (its
   // vector width rounds the tracks otherwise), so each run must end unmirrored, and the two together must
   // have flipped a map at least once (the test of the flip, wherever the initialisation went wrong).
   TempDir dir;
   size_t reversals = 0;
   for (const std::string seed : {"1", "3"}) {
-    const auto synth = RunMcslam("synth --scenario rotation --image-scale 2 --frames 50 --seed " + seed +
+    const auto synth = RunMcslam("synth --scenario rotation --image-scale 2 --frames " + std::to_string(kFrames) +
+                                 " --seed " + seed +
                                  " --render --out " + dir / ("s" + seed));
     ASSERT_EQ(synth.exit_code, 0) << synth.output;
     const auto r = RunMcslam("run " + dir / ("s" + seed) + " --dataset synthetic --out " + dir / ("r" + seed));
@@ -397,11 +400,11 @@ TEST(CliRun, AMapMadeOnTheMirrorOfTheSceneIsFlippedWhenTheFramesAfterItTell) {
     const nlohmann::json j = testing::ReadJson(dir / ("r" + seed + "/report.json"));
     const io::Trajectory est = io::ReadTum(dir / ("r" + seed + "/trajectory.txt"));
     const io::Trajectory smooth = io::ReadTum(dir / ("r" + seed + "/trajectory_smoothed.txt"));
-    ASSERT_EQ(est.size(), 50u) << r.output;  // every frame posed: row k is frame k
-    ASSERT_EQ(smooth.size(), 50u);
+    ASSERT_EQ(est.size(), static_cast<size_t>(kFrames)) << r.output;  // every frame posed: row k is frame k
+    ASSERT_EQ(smooth.size(), static_cast<size_t>(kFrames));
     for (const nlohmann::json& d : j["depth_reversals"]) {
       const int frame = d["frame"].get<int>();
-      EXPECT_LE(frame, 50);
+      EXPECT_LT(frame, kFrames);
       EXPECT_NE(r.output.find("the map was the mirror of the scene in depth: flipped"), std::string::npos) << r.output;
       // The smoothed (AR) pose starts again at the flipped map's: within 1 deg of the pose at the flip and the
       // frame after it (measured 0.0 and 0.14 deg on seed 1; carried over from the mirrored map, 7.1 and 2.0).
@@ -413,11 +416,28 @@ TEST(CliRun, AMapMadeOnTheMirrorOfTheSceneIsFlippedWhenTheFramesAfterItTell) {
       }
     }
     reversals += j["depth_reversals"].size();
-    EXPECT_EQ(j["tracked"], 50) << r.output;
+    EXPECT_EQ(j["tracked"], kFrames) << r.output;
     EXPECT_FALSE(j["ground_truth"]["mirrored"].get<bool>()) << seed << ": " << j["ground_truth"].dump();
     EXPECT_LT(j["ground_truth"]["rot_deg"]["mean"].get<double>(), 10.0) << seed << ": " << j["ground_truth"].dump();
   }
   EXPECT_GE(reversals, 1u);
+}
+
+// A plane seen through a narrow view: the map and its mirror in depth fit the settling window nearly alike, and the
+// tracks' errors may give the mirror a lead that does not grow as the parallax does. The planar scenario rendered at
+// 160x120, seed 5: the mirror ahead by 1.89x at frame 30 and 1.62x at 33 (a chi-square of 60 and 42); flipped at
+// 30, the map ended 23.5 cm and 113 deg off; kept, 0.51 cm and 0.33 deg (AVX2, 2026-12-07). Bound: 2 cm, 4x the kept
+// map, a tenth of the flipped one.
+TEST(CliRun, APlanesMirrorIsNotTakenOnALeadThatDoesNotGrow) {
+  TempDir dir;
+  const auto synth = RunMcslam("synth --scenario planar --seed 5 --render --image-scale 0.5 --out " + dir / "s");
+  ASSERT_EQ(synth.exit_code, 0) << synth.output;
+  const auto run = RunMcslam("run " + dir / "s --dataset synthetic --seed 5 --out " + dir / "r");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const nlohmann::json r = testing::ReadJson(dir / "r/report.json");
+  EXPECT_TRUE(r["depth_reversals"].empty()) << r["depth_reversals"].dump();
+  EXPECT_LT(r["ground_truth"]["ate_m"]["rmse"].get<double>(), 0.02) << run.output;
+  EXPECT_FALSE(r["ground_truth"]["mirrored"].get<bool>()) << r["ground_truth"].dump();
 }
 
 TEST(CliRun, SequenceThatNeverInitialisesFailsButKeepsItsOutputs) {
