@@ -50,6 +50,7 @@ void Settler::BeginSettling(int init_slot, double baseline, double two_view_para
   init_baseline_ = baseline;
   init_min_points_ = min_points;
   settling_ = s_.options.init.settle_parallax_deg > 0;
+  mirror_lead_ = 0;  // a lead found while an earlier map settled says nothing about this one
   next_settle_parallax_deg_ = s_.options.init.settle_step * std::max(two_view_parallax_deg, 1e-3);
 }
 
@@ -71,6 +72,7 @@ double Settler::ParallaxFromReference(int slot) const {
 void Settler::Settle(int slot, std::vector<FrameReport>* out) {
   const InitOptions& io = s_.options.init;
   const double parallax = ParallaxFromReference(slot);
+  const bool last = parallax >= io.settle_parallax_deg;  // the settling's last step: it has settled
   // Posed frames since the reference (at most settle_max_frames, evenly spread, with the reference, the
   // initialisation's frame and this one), and every map point seen at least twice among them.
   std::vector<int> posed;
@@ -98,11 +100,11 @@ void Settler::Settle(int slot, std::vector<FrameReport>* out) {
   bo.linear_solver = geometry::BundleAdjustOptions::LinearSolver::kIterativeSchur;
   geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   std::string reversal;
-  if (FlipIfMirrored(window, parallax >= io.settle_parallax_deg, &cams, &wp, &reversal))
+  if (FlipIfMirrored(window, last, &cams, &wp, &reversal))
     geometry::BundleAdjust(cams, wp.X, wp.obs, fixed, bo);
   // (The radial-tangential k1 only: a fisheye's equidistant model is kept as given, its calibration being part of
   // any fisheye's setup.)
-  if (parallax >= io.settle_parallax_deg && io.self_calibrate && !s_.camera.dist.IsFisheye() &&
+  if (last && io.self_calibrate && !s_.camera.dist.IsFisheye() &&
       !self_calibration_.tried && SelfCalibrate(window, cams, wp, slot)) {
     // The features undistorted again with the refined camera (the same points, in the same order), adjusted again.
     std::vector<Eigen::Vector3d> adjusted = std::move(wp.X);
@@ -155,7 +157,7 @@ void Settler::Settle(int slot, std::vector<FrameReport>* out) {
   }
   std::string note = fmt::format(
       "{}: {} of {} frames and {} points refined together {}",
-      parallax >= io.settle_parallax_deg ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(),
+      last ? "settled" : "settling", window.size(), posed.size(), wp.pts.size(),
       std::isfinite(parallax) ? fmt::format("at a median parallax of {:.1f} deg", parallax)
                               : fmt::format("as the view moved on (fewer than {} of the reference's points in view)",
                                             init_min_points_));

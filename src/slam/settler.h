@@ -81,7 +81,7 @@ class Settler {
   double next_settle_parallax_deg_ = 0;
   int init_slot_ = -1;          // the frame the initialisation ended on
   double init_baseline_ = 1.0;  // its distance from the reference camera: the scale, kept by every settling
-  double mirror_lead_ = 0;       // the mirror's lead (the map's cost over its mirror's) at the last step, 0: none
+  double mirror_lead_ = 0;      // the mirror's lead (the map's cost over its mirror's) at the step before, 0: none
   int init_min_points_ = 0;     // the point count the initialisation asked for (InitOptions::min_points, lowered)
   SelfCalibration self_calibration_;
 };
