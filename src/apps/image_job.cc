@@ -384,7 +384,7 @@ void ImageRun::RunFrames() {
       overlay->SetCamera(vslam->system().camera());
       overlay->Write(p.image, fr, vslam->system().map(), current);
     }
-    row.frame_ms = MsSince(p.t_frame);  // the frame's latency: from its decoding to its step
+    row.frame_ms = MsSince(p.t_frame);  // the frame's latency: from the reader's hand-over to its step
     const int64_t index = row.index;
     rows.push_back(std::move(row));
     progress.Update(frames_processed, index, tracked, lost, vslam->system().map().points().size(),
@@ -396,14 +396,16 @@ void ImageRun::RunFrames() {
   };
   try {
     io::Frame frame;
+    // The next frame is read and decoded while this one is worked on; decode_ms is the reading's own time.
+    io::PrefetchingSource reader(data.source.get());
     while (!Interrupted()) {
       const auto t_frame = Clock::now();
-      if (!data.source->Next(&frame)) {
+      double decode_ms = 0;
+      if (!reader.Next(&frame, &decode_ms)) {
         source_ended = true;
         break;
       }
       frames_decoded = frame.index + 1;
-      const double decode_ms = MsSince(t_frame);
       if (frame.index < options.start) continue;
       if (options.end >= 0 && frame.index > options.end) break;
       ++frames_read;

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <future>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 #include <system_error>
@@ -284,5 +285,39 @@ bool VideoSource::Next(Frame* frame) {
 std::optional<cv::Size> VideoSource::ImageSize() { return size_; }
 
 std::optional<int64_t> VideoSource::FrameCount() const { return count_; }
+
+PrefetchingSource::~PrefetchingSource() {
+  if (next_.valid()) next_.wait();  // an exception it holds is dropped with it
+}
+
+void PrefetchingSource::Launch() {
+  next_ = std::async(std::launch::async, [source = source_] {
+    Read r;
+    const auto t0 = std::chrono::steady_clock::now();
+    r.more = source->Next(&r.frame);
+    r.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    return r;
+  });
+}
+
+bool PrefetchingSource::Next(Frame* frame, double* read_ms) {
+  if (ended_) return false;
+  if (!next_.valid()) Launch();
+  Read r;
+  try {
+    r = next_.get();
+  } catch (...) {
+    ended_ = true;  // the source's state after a throw is its own: nothing more is read from it here
+    throw;
+  }
+  if (!r.more) {
+    ended_ = true;
+    return false;
+  }
+  Launch();  // the next frame, while the caller works on this one
+  *frame = std::move(r.frame);
+  if (read_ms) *read_ms = r.ms;
+  return true;
+}
 
 }  // namespace mcslam::io

@@ -7,6 +7,7 @@
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -128,6 +129,60 @@ TEST(Datasets, CorruptImageIsReportedNotFatal) {
   int bad = 0;
   EXPECT_EQ(CountFrames(*src2, &bad), 2);
   EXPECT_EQ(bad, 1);
+}
+
+// Reading ahead hands out what the source does, frame by frame: the same images, indices, stamps, names and
+// errors, in order, and then the end, once and for good; how long each frame took to read is said. A source that
+// throws throws out of the reader's Next for that frame, and nothing more is read from it.
+TEST(Datasets, ReadingAheadHandsOutWhatTheSourceDoes) {
+  TempDir dir;
+  const cv::Size size(32, 24);
+  for (int i = 0; i < 6; ++i) WriteImage(dir / fmt::format("{:03d}.png", i), size, 10 * i + 5);
+  WriteText(dir / "003.png", "this is not a png");
+  auto plain = OpenImageFolder(dir.path().string());
+  auto ahead = OpenImageFolder(dir.path().string());
+  PrefetchingSource reader(ahead.get());
+  Frame a, b;
+  int frames = 0;
+  while (plain->Next(&a)) {
+    double read_ms = -1;
+    ASSERT_TRUE(reader.Next(&b, &read_ms)) << "frame " << a.index;
+    EXPECT_EQ(b.index, a.index);
+    EXPECT_EQ(b.stamp_s, a.stamp_s);
+    EXPECT_EQ(b.name, a.name);
+    EXPECT_EQ(b.error, a.error);
+    ASSERT_EQ(b.ok(), a.ok()) << "frame " << a.index;
+    if (a.ok()) {
+      EXPECT_EQ(cv::norm(a.image, b.image, cv::NORM_INF), 0.0) << "frame " << a.index;
+    }
+    EXPECT_GT(read_ms, 0.0);
+    ++frames;
+  }
+  EXPECT_EQ(frames, 6);
+  EXPECT_FALSE(reader.Next(&b));
+  EXPECT_FALSE(reader.Next(&b));
+
+  // A source that throws at its third frame.
+  struct Throwing : ImageSource {
+    int next = 0;
+    bool Next(Frame* f) override {
+      if (next == 2) throw std::runtime_error("the disk went away at frame 2");
+      f->index = next++;
+      f->image = cv::Mat(2, 2, CV_8U, cv::Scalar(1));
+      return true;
+    }
+    std::optional<cv::Size> ImageSize() override { return cv::Size(2, 2); }
+    std::optional<int64_t> FrameCount() const override { return std::nullopt; }
+    std::string Description() const override { return "throwing"; }
+  } throwing;
+  PrefetchingSource from_throwing(&throwing);
+  ASSERT_TRUE(from_throwing.Next(&b));
+  EXPECT_EQ(b.index, 0);
+  ASSERT_TRUE(from_throwing.Next(&b));
+  EXPECT_EQ(b.index, 1);
+  ExpectThrowsWith([&] { from_throwing.Next(&b); }, "disk went away", "frame 2");
+  EXPECT_FALSE(from_throwing.Next(&b));
+  EXPECT_EQ(throwing.next, 2);  // nothing read after the throw
 }
 
 TEST(Datasets, VideoThatCannotBeOpenedIsAClearError) {
