@@ -53,7 +53,7 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   }
 
   // Shi-Tomasi response and its local maxima, strongest first, away from the border and from every track.
-  cv::cornerMinEigenVal(gray, eig, o.block_size, 3);
+  CornerResponse(gray, o.block_size, &eig);
   double max_response = 0;
   cv::minMaxLoc(eig, nullptr, &max_response);
   std::vector<Candidate> candidates;

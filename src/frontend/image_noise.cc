@@ -85,4 +85,21 @@ double NoiseCornerResponse(int block_size, double fraction) {
   return static_cast<double>(largest[keep - 1]) / (kSigma * kSigma);
 }
 
+void CornerResponse(const cv::Mat& gray, int block_size, cv::Mat* response) {
+  if (static_cast<int64_t>(gray.total()) < kBandedResponsePixels) {
+    cv::cornerMinEigenVal(gray, *response, block_size, 3);
+    return;
+  }
+  response->create(gray.size(), CV_32F);
+  const int rows = gray.rows, margin = block_size + 2;
+  const int bands = (rows + kResponseBandRows - 1) / kResponseBandRows;
+  tbb::parallel_for(0, bands, [&](int band) {
+    const int y0 = band * kResponseBandRows, y1 = std::min(rows, y0 + kResponseBandRows);
+    const int top = std::max(0, y0 - margin), bottom = std::min(rows, y1 + margin);
+    cv::Mat part;
+    cv::cornerMinEigenVal(gray.rowRange(top, bottom), part, block_size, 3);
+    part.rowRange(y0 - top, y1 - top).copyTo(response->rowRange(y0, y1));
+  });
+}
+
 }  // namespace mcslam::frontend
