@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 #include <spdlog/spdlog.h>
 
@@ -69,6 +70,9 @@ void ImageJobOptions::Check() const {
   if (!(fps >= 0) || !std::isfinite(fps)) throw std::invalid_argument(fmt::format("--fps must be >= 0, got {}", fps));
   if (!overlay_path.empty() && Lower(fs::path(overlay_path).extension().string()) != ".mp4")
     throw std::invalid_argument(fmt::format("--overlay {}: the overlay is an .mp4 file (mp4v)", overlay_path));
+  if (!(max_megapixels == 0 || (max_megapixels >= 0.01 && std::isfinite(max_megapixels))))
+    throw std::invalid_argument(
+        fmt::format("--max-megapixels must be 0 (frames as they come) or >= 0.01, got {}", max_megapixels));
   if (!plot_path.empty() && !cv::haveImageWriter(plot_path))
     throw std::invalid_argument(fmt::format("--plot {}: not an image file name OpenCV can write (use .png)", plot_path));
   if (!load_map_path.empty() && !relocalise)
@@ -116,6 +120,10 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
   cmd->add_option("--fps", o->fps, "Frame rate for the stamps of sources without their own (0: the source's)")
       ->capture_default_str();
   cmd->add_option("--max-features", o->frontend.max_features, "Front end: most tracks at once")->capture_default_str();
+  cmd->add_option("--max-megapixels", o->max_megapixels,
+                  "Frames of more pixels than this (millions) are worked on halved (again until they are not), the "
+                  "camera with them: a 1920x1080 video at 960x540 (0: frames as they come)")
+      ->capture_default_str();
   cmd->add_flag("--no-relocalise{false}", o->relocalise,
                 "Once lost, only the last pose is searched around (default: the features are also matched to the map "
                 "by their descriptors, and a pose from those restarts the tracking)");
@@ -161,6 +169,31 @@ bool IsImageInput(const std::string& input, const ImageJobOptions& options) {
 
 // ---- the job ---------------------------------------------------------------------------------------------
 
+cv::Mat Halved(const cv::Mat& image, int times) {
+  cv::Mat out = image;
+  for (int k = 0; k < times && out.cols >= 2 && out.rows >= 2; ++k) {
+    const cv::Mat even = out(cv::Rect(0, 0, out.cols - out.cols % 2, out.rows - out.rows % 2));
+    cv::Mat half;
+    cv::resize(even, half, cv::Size(even.cols / 2, even.rows / 2), 0, 0, cv::INTER_AREA);
+    out = half;
+  }
+  return out;
+}
+
+PinholeCamera HalvedCamera(const PinholeCamera& camera, double max_megapixels, int* halvings) {
+  PinholeCamera c = camera;
+  int n = 0;
+  while (max_megapixels > 0 && static_cast<double>(c.width) * c.height > max_megapixels * 1e6 && c.width >= 2 &&
+         c.height >= 2) {
+    c.width -= c.width % 2;  // the odd last column or row left out: the principal point does not move
+    c.height -= c.height % 2;
+    c = c.Scaled(0.5);  // 2x2 averages: pixel centres where Scaled puts them
+    ++n;
+  }
+  if (halvings) *halvings = n;
+  return c;
+}
+
 
 // Everything that can be checked before any work.
 void ImageRun::Open() {
@@ -186,6 +219,13 @@ void ImageRun::Open() {
         data.source->Description()));
   camera = *data.camera;
   camera.Check();
+  input_camera = camera;
+  camera = HalvedCamera(input_camera, options.max_megapixels, &halvings);
+  if (halvings > 0)
+    spdlog::info("frames of {}x{} worked on at {}x{} (halved {}: more than --max-megapixels {} million pixels; 0 keeps "
+                 "them)",
+                 input_camera.width, input_camera.height, camera.width, camera.height,
+                 halvings == 1 ? std::string("once") : fmt::format("{} times", halvings), options.max_megapixels);
   if (!data.image_size)
     spdlog::warn("{}: the image size is not known before reading; frames of another size than the camera's {}x{} "
                  "will be skipped",
@@ -414,10 +454,11 @@ void ImageRun::RunFrames() {
       row.stamp_s = frame.stamp_s;
       row.name = frame.name;
       row.decode_ms = decode_ms;
-      if (frame.ok() && (frame.image.cols != camera.width || frame.image.rows != camera.height))
+      if (frame.ok() && (frame.image.cols != input_camera.width || frame.image.rows != input_camera.height))
         frame.error = fmt::format("the image is {}x{} but the camera is {}x{}", frame.image.cols, frame.image.rows,
-                                  camera.width, camera.height),
+                                  input_camera.width, input_camera.height),
         frame.image.release();
+      if (frame.ok()) frame.image = Halved(frame.image, halvings);
       if (!frame.ok()) {
         finish_in_flight();
         progress.Clear();

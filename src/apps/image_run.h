@@ -33,7 +33,9 @@ struct ImageRun {
   ImageJobOptions options;
   // Open: the input, its camera and ground truth; no frame is processed before every check has passed.
   io::Dataset data;
-  PinholeCamera camera;
+  PinholeCamera camera;        // the camera of the frames as worked on (halved: ImageJobOptions::max_megapixels)
+  PinholeCamera input_camera;  // ... and as given, of the frames as they come
+  int halvings = 0;            // how many times each frame is halved
   std::optional<io::Trajectory> gt;
   std::string gt_origin;
   std::optional<int64_t> count;  // frames, when the source knows

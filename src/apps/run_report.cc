@@ -310,7 +310,10 @@ void ImageRun::WriteReport() {
   j["camera"] = {{"fx", camera.fx}, {"fy", camera.fy}, {"cx", camera.cx}, {"cy", camera.cy},
                  {"width", camera.width}, {"height", camera.height}, {"distorted", camera.HasDistortion()},
                  {"lens_model", ToString(camera.dist.model)},
-                 {"origin", data.camera_origin}};
+                 {"origin", data.camera_origin},
+                 // The frames as they came, and how many times they were halved to the size above (--max-megapixels).
+                 {"input_width", input_camera.width}, {"input_height", input_camera.height},
+                 {"halvings", halvings}};
   j["notes"] = notes;
   j["options"] = {{"backend", backend},
                   {"pose", sys_opts.pose_method == slam::PoseMethod::kPnp ? "pnp" : "mc"},
@@ -337,7 +340,7 @@ void ImageRun::WriteReport() {
                            {"gt", options.gt_path},            {"format", options.format},
                            {"fps", options.fps},               {"gt_scale", options.gt_scale},
                            {"relocalise", options.relocalise}, {"relocalise_turned", options.relocalise_turned},
-                           {"pipelined", options.pipelined},
+                           {"pipelined", options.pipelined},   {"max_megapixels", options.max_megapixels},
                            {"overlay", options.overlay_path},
                            {"plot", options.plot_path},        {"viewer", options.viewer}};
   if (!options.load_map_path.empty() || !options.save_map_path.empty()) {

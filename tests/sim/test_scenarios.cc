@@ -348,7 +348,9 @@ TEST(Scenarios, AWiderFieldOfViewSeesMoreOfTheSceneInTheSameImage) {
       seen_wide += wide.frames[i].observations.size();
     }
     EXPECT_GE(seen_wide, seen_base) << name;
-    if (name == "rotation") EXPECT_GT(seen_wide, seen_base + seen_base / 4);
+    if (name == "rotation") {
+      EXPECT_GT(seen_wide, seen_base + seen_base / 4);
+    }
   }
   ScenarioOptions bad;
   for (double hfov : {-1.0, 4.0, 151.0, std::nan("")}) {
