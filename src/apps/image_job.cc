@@ -229,7 +229,7 @@ void ImageRun::Open() {
   if (!data.image_size)
     spdlog::warn("{}: the image size is not known before reading; frames of another size than the camera's {}x{} "
                  "will be skipped",
-                 data.source->Description(), camera.width, camera.height);
+                 data.source->Description(), input_camera.width, input_camera.height);
 
   gt = data.ground_truth;
   gt_origin = gt ? fmt::format("{} ({})", data.path, io::ToString(data.kind)) : "";

@@ -119,9 +119,9 @@ class VideoSource : public ImageSource {
 // ---- reading ahead -----------------------------------------------------------------------------------
 
 // Reads a source one frame ahead on a thread of its own: the next frame is decoded while the caller works on the
-// one it has (a PNG of 1920x1440 took 24 ms a frame to decode, a fifth of a frame's work, on one core while the
-// other was idle for most of the front end). The same frames in the same order as the source's own Next, errors
-// included; an exception the source throws comes out of the Next that would have returned that frame.
+// one it has (a PNG of 1920x1440 took 21 ms a frame to decode, a fifth of a frame's work: docs/tuning.md). The same
+// frames in the same order as the source's own Next, errors included; an exception the source throws comes out of
+// the Next that would have returned that frame.
 class PrefetchingSource {
  public:
   // Does not own `source`, which must outlive this reader and must not be read from elsewhere meanwhile.
