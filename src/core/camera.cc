@@ -49,10 +49,6 @@ Eigen::Vector2d PinholeCamera::NormalizedToPixel(const Eigen::Vector2d& n) const
   return {fx * n.x() + cx, fy * n.y() + cy};
 }
 
-Eigen::Vector2d PinholeCamera::PixelToNormalized(const Eigen::Vector2d& p) const {
-  return {(p.x() - cx) / fx, (p.y() - cy) / fy};
-}
-
 const char* ToString(LensModel model) {
   return model == LensModel::kEquidistant ? "equidistant" : "radial-tangential";
 }
@@ -161,11 +157,6 @@ bool PinholeCamera::ProjectWorld(const Pose& cam_from_world, const Eigen::Vector
   if (J_translation) *J_translation = J_cam;  // d(Rz + t)/dt = I
   if (J_world) *J_world = J_cam * cam_from_world.R();
   return true;
-}
-
-Eigen::Vector3d PinholeCamera::Unproject(const Eigen::Vector2d& uv_px) const {
-  const Eigen::Vector2d n = Undistort(PixelToNormalized(uv_px));
-  return {n.x(), n.y(), 1.0};
 }
 
 Eigen::Vector2d PinholeCamera::UndistortPixel(const Eigen::Vector2d& uv_px) const {

@@ -52,7 +52,9 @@ class PinholeCamera {
 
   // Without distortion: pixel = K * [uv_norm; 1], and its inverse.
   Eigen::Vector2d NormalizedToPixel(const Eigen::Vector2d& uv_norm) const;
-  Eigen::Vector2d PixelToNormalized(const Eigen::Vector2d& uv_px) const;
+  Eigen::Vector2d PixelToNormalized(const Eigen::Vector2d& uv_px) const {
+    return {(uv_px.x() - cx) / fx, (uv_px.y() - cy) / fy};
+  }
 
   // Apply the distortion model to undistorted normalised coordinates, optionally with its 2x2 Jacobian.
   Eigen::Vector2d Distort(const Eigen::Vector2d& uv_norm, Eigen::Matrix2d* J = nullptr) const;
@@ -70,8 +72,12 @@ class PinholeCamera {
                     Eigen::Matrix<double, 2, 3>* J_world = nullptr,
                     Eigen::Matrix<double, 2, 3>* J_translation = nullptr) const;
 
-  // Ray through a (distorted) pixel as [x, y, 1] in camera coordinates.
-  Eigen::Vector3d Unproject(const Eigen::Vector2d& uv_px) const;
+  // Ray through a (distorted) pixel as [x, y, 1] in camera coordinates. Defined here: for a camera without
+  // distortion (the renderer's, once per ray) it is a subtraction and a division, no call.
+  Eigen::Vector3d Unproject(const Eigen::Vector2d& uv_px) const {
+    const Eigen::Vector2d n = HasDistortion() ? Undistort(PixelToNormalized(uv_px)) : PixelToNormalized(uv_px);
+    return {n.x(), n.y(), 1.0};
+  }
   // Distorted pixel -> the pixel an ideal pinhole camera with the same K would have seen. The back end works with
   // such pixels (x/z, y/z): a fisheye's ray more than kMaxPinholeRayAngleDeg off the axis has none worth the name
   // (tan 90 degrees), and its pixel errors would grow as 1 / cos^2 of the angle: NaN is returned for it.

@@ -241,13 +241,9 @@ cv::Mat SceneRenderer::Render(const PinholeCamera& camera, const Pose& cam_from_
       quads_of_row[static_cast<size_t>(y)].push_back(static_cast<int>(q));
   }
 
-  // The surface a ray through px meets first (quad -1: the background). A camera without distortion unprojects
-  // here, in line, by the arithmetic of PinholeCamera::Unproject (the same bits; its call was a sixth of a render).
-  const bool pinhole = !camera.HasDistortion();
+  // The surface a ray through px meets first (quad -1: the background).
   const auto cast = [&](const Eigen::Vector2d& px, int x, int y) {
-    const Eigen::Vector3d ray = pinhole ? Eigen::Vector3d((px.x() - camera.cx) / camera.fx, (px.y() - camera.cy) / camera.fy, 1.0)
-                                        : camera.Unproject(px);
-    const Eigen::Vector3d d = (R * ray).normalized();
+    const Eigen::Vector3d d = (R * camera.Unproject(px)).normalized();
     QuadHit best, hit;
     best.t = std::numeric_limits<double>::infinity();
     for (const int q : quads_of_row[static_cast<size_t>(y)]) {
