@@ -394,6 +394,7 @@ void ImageRun::RunFrames() {
     row.reloc_inliers = step.reloc_inliers;
     row.reloc_turned = step.reloc_turned;
     row.reloc_ms = step.reloc_ms;
+    row.merged_tracks = step.merged_tracks;
     row.backend_ms = step.backend_ms;
     if (step.reloc_inliers > 0) {
       progress.Clear();

@@ -359,6 +359,9 @@ void ImageRun::WriteReport() {
   j["initialisation_rejections"] = init_rejections;
   j["depth_reversals"] = depth_reversals;
   j["map_restarts"] = map_restarts;
+  int64_t merged_tracks = 0;
+  for (const FrameRow& row : rows) merged_tracks += row.merged_tracks;
+  j["revisits_merged"] = merged_tracks;  // new tracks that went on as an older map point (Mapper::RevisitedPoint)
   j["self_calibration"] = SelfCalibrationJson(vslam->system().self_calibration());
   j["interrupted"] = interrupted;
   AddRunTimes(times, &j);

@@ -34,6 +34,7 @@ struct FrameRow {
   int reloc_matches = 0, reloc_inliers = 0;
   bool reloc_turned = false;  // ... from descriptors turned about the camera's axis (VisualSlamOptions::relocalise_turned)
   double reloc_ms = 0;
+  int merged_tracks = 0;  // new tracks that went on as the map point of a place seen again (VisualSlamStep)
   double decode_ms = 0, frame_ms = 0;
   double backend_ms = 0;     // System::Process, wall time
   bool before_init = false;  // the back end had no map when this frame came: its time is initialisation's

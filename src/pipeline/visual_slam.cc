@@ -77,7 +77,29 @@ VisualSlam::VisualSlam(const PinholeCamera& camera, VisualSlamOptions options,
     : given_camera_(camera),
       options_(Prepared(std::move(options))),
       frontend_(options_.frontend),
-      system_(camera, options_.system, std::move(pose_kernel), std::move(point_kernel)) {}
+      system_(camera, options_.system, std::move(pose_kernel), std::move(point_kernel)) {
+  system_.SetLookCheck([this](int64_t track, int64_t point) { return SameLook(track, point); });
+}
+
+void VisualSlam::KeepTrackLooks(const FrameObservations& obs) {
+  track_looks_.clear();
+  if (!(options_.system.mapping.merge_revisited_points || map_loaded_) || !system_.initialised()) return;
+  for (const FeatureObservation& f : obs.features)
+    if (!system_.map().Find(f.feature_id))
+      if (std::optional<frontend::Descriptor> d = frontend_.DescriptorIfDone(f.feature_id))  // else: a later frame
+        track_looks_.emplace(f.feature_id, *d);
+}
+
+bool VisualSlam::SameLook(int64_t track, int64_t point) const {
+  const auto look = track_looks_.find(track);
+  if (look == track_looks_.end()) return false;
+  const double cap = options_.frontend.remap_max_distance;
+  for (const auto* looks : {&lost_descriptors_, &first_descriptors_})
+    if (const auto it = looks->find(point);
+        it != looks->end() && frontend::DescriptorDistance(look->second, it->second) <= cap)
+      return true;
+  return false;
+}
 
 void VisualSlam::KeepFirstLooks(const FrameObservations& obs) {
   if (!system_.initialised()) return;
@@ -164,6 +186,7 @@ void VisualSlam::LoadMap(const io::MapFile& map) {
     keyframes.push_back(std::move(f));
   }
   system_.StartInMap(std::move(points), std::move(keyframes), map.camera);
+  map_loaded_ = true;
   frontend_.ReserveIdsBelow(next_id);
   was_lost_ = true;  // the first frame is relocalised
 }
@@ -279,6 +302,7 @@ FrameObservations VisualSlam::BeforeBackend(bool after_gap, VisualSlamStep* step
     Relocalise(step->frontend, &obs, step, was_lost_ || after_gap);
     step->reloc_ms = MsSince(t_reloc);
   }
+  KeepTrackLooks(obs);
   return obs;
 }
 
@@ -302,6 +326,7 @@ void VisualSlam::AfterBackend(const FrameObservations& obs, VisualSlamStep* step
   // Tracks the System took as older map points (a place seen again): they go on under the points' ids, with
   // their own descriptors (this view's). A next frame already through the front end reports them under their
   // tracks' ids: renamed there too (a track that ended in it leaves its descriptor to the point).
+  step->merged_tracks = static_cast<int>(system_.merged_tracks().size());
   for (const auto& [track, point] : system_.merged_tracks()) {
     bool ended_next = false;
     if (next) {

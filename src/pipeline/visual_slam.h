@@ -109,6 +109,8 @@ struct VisualSlamStep {
   double reloc_turn_deg = 0;
   bool reloc_turned = false;
   double reloc_ms = 0;
+  // Tracks that went on as the map point of a place seen again in this frame's back end (System::merged_tracks).
+  int merged_tracks = 0;
   // The report of this frame among `reports` (nullptr when the System gave none for it).
   const slam::FrameReport* current() const;
 };
@@ -117,6 +119,8 @@ class VisualSlam {
  public:
   VisualSlam(const PinholeCamera& camera, VisualSlamOptions options, std::unique_ptr<compute::PoseKernel> pose_kernel,
              std::unique_ptr<compute::PointKernel> point_kernel);
+  VisualSlam(const VisualSlam&) = delete;  // the System's look check calls back into this object
+  VisualSlam& operator=(const VisualSlam&) = delete;
 
   // Runs one readable frame through the front end and the back end. Throws UnusableFrame when the front end
   // does not take the image's pixel type: nothing has changed then but that the next frame counts as coming
@@ -177,6 +181,13 @@ class VisualSlam {
   VisualSlamStep Complete(InFlight frame);
   // Keeps the descriptor of each feature of the frame that is a map point without a first look yet.
   void KeepFirstLooks(const FrameObservations& obs);
+  // A place seen again is merged into its map points (MappingOptions::merge_revisited_points, and always in a loaded
+  // map) only where it looks like them: a new track's SIFT descriptor within FrontendOptions::remap_max_distance of
+  // the point's last or first look, as remapping accepts a match (System::SetLookCheck). By projection alone, a
+  // nearby point of the same corner-poor patch was taken for the point (docs/tuning.md). The looks of the frame's
+  // tracks that are no map point yet are taken before the back end runs (the front end may run beside it).
+  void KeepTrackLooks(const FrameObservations& obs);
+  bool SameLook(int64_t track, int64_t point) const;
 
   PinholeCamera given_camera_;  // as given (the System's may have its k1 self-calibrated)
   VisualSlamOptions options_;
@@ -185,6 +196,8 @@ class VisualSlam {
   std::unordered_map<int64_t, frontend::Descriptor> lost_descriptors_;  // map points whose track ended
   // Every map point's look when it joined the map (its track's descriptor then): relocalisation's second look.
   std::unordered_map<int64_t, frontend::Descriptor> first_descriptors_;
+  std::unordered_map<int64_t, frontend::Descriptor> track_looks_;  // KeepTrackLooks: this frame's new tracks
+  bool map_loaded_ = false;                                         // LoadMap: the run started in a map
   std::optional<Pose> latest_cam_from_world_;
   // Remapping's failed tries of each lost map point in view since it came into view (VisualSlamOptions'
   // remap_tries_every_frame), and the last frame in which it was lost and in view; only points in view now.

@@ -285,6 +285,9 @@ std::optional<int64_t> Mapper::RevisitedPoint(const FeatureUndistorted& f, const
       if (!agrees) break;
     }
     if (!agrees) continue;
+    // Where looks are known, the track must look like the point too (a nearby point of a corner-poor patch fits
+    // the views as well; its look tells it apart), and only those that do are counted.
+    if (s_.same_look && !s_.same_look(f.id, id)) continue;
     if (found) return std::nullopt;
     found = id;
   }

@@ -4,6 +4,7 @@
 // frame, the last posed frame). Each stage (Initializer, Settler, FrameTracker, Mapper, PointAdjuster, Bridge, the
 // relocaliser) owns its own state and reads and writes the map through this; the queries below are the map's that
 // more than one stage asks.
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -42,6 +43,9 @@ struct SlamState {
   std::unique_ptr<PoseTracker> pose_step;  // §5, from construction (System); its translation floor set at initialisation
   PoseSmoother smoother;
   std::function<std::optional<double>(double, double)> oracle;  // --gt-scale: the true baseline between two stamps
+  // Whether new track `track` looks like map point `point` (System::SetLookCheck: their descriptors); empty: no look
+  // is known here, and a place seen again is merged by projection alone.
+  std::function<bool(int64_t track, int64_t point)> same_look;
   // The points of a map this run started in (System::StartInMap): the adjustments (local bundle adjustment, the
   // Monte Carlo point adjustment or the bundle adjustment in its place, a bridge's) hold them fixed, and the map is never dropped for a new one
   // (System::MaybeRestart). One removed and triangulated again from this run's views leaves the set.

@@ -335,6 +335,10 @@ void System::SetBaselineOracle(std::function<std::optional<double>(double, doubl
   st_->state.oracle = std::move(oracle);
 }
 
+void System::SetLookCheck(std::function<bool(int64_t track, int64_t point)> check) {
+  st_->state.same_look = std::move(check);
+}
+
 bool System::initialised() const { return st_->state.initialised; }
 bool System::localised() const { return st_->state.last_posed_slot >= 0; }
 const Map& System::map() const { return st_->state.map; }

@@ -57,6 +57,11 @@ class System {
   // For --gt-scale: the true distance between the camera centres at two stamps, when known. The first
   // baseline is then scaled to it instead of to 1.
   void SetBaselineOracle(std::function<std::optional<double>(double, double)> oracle);
+  // Whether a new track looks like a map point (the caller's descriptors of both: VisualSlam). Set, a place seen
+  // again (MappingOptions::merge_revisited_points, and always in a loaded map: a new track whose triangulated point
+  // is where an unseen map point projects goes on as that point) is merged only where the two also look alike,
+  // and those that do not are not counted among the candidates. Called from Process, on the thread that calls it.
+  void SetLookCheck(std::function<bool(int64_t track, int64_t point)> check);
 
   // Starts in a map made before (a map file): its points and its keyframes (poses and features). Only before
   // the first frame; throws std::logic_error after one. The System is then initialised but not localised: a

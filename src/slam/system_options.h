@@ -157,7 +157,9 @@ struct MappingOptions {
   // CliRun's 30-frame gap the pose step's second try alone no longer reached across (0 frames tracked after it).
   // In a loaded map (System::StartInMap) it is on whatever this says: there the run is in a place mapped before,
   // and on 7-Scenes seeds 1-8 it cut the points a second run adds to its loaded map from 268-371 to 51-81 at the same
-  // accuracy (docs/map_seeds.md).
+  // accuracy (docs/map_seeds.md). Where the caller knows the looks (System::SetLookCheck: an image run's
+  // descriptors), a merge also needs the track to look like the point; with that, on the robustness matrix, it is
+  // still no gain worth a default (docs/tuning.md, 2026-12-07).
   bool merge_revisited_points = false;
   // Frames whose features are kept (their poses are always kept): older ones drop theirs, so that memory and
   // the triangulation's search through the track history stay bounded on a run of any length. Never less
