@@ -83,7 +83,7 @@ VisualSlam::VisualSlam(const PinholeCamera& camera, VisualSlamOptions options,
 
 void VisualSlam::KeepTrackLooks(const FrameObservations& obs) {
   track_looks_.clear();
-  if (!(options_.system.mapping.merge_revisited_points || map_loaded_) || !system_.initialised()) return;
+  if (!system_.merges_revisits() || !system_.initialised()) return;
   for (const FeatureObservation& f : obs.features)
     if (!system_.map().Find(f.feature_id))
       if (std::optional<frontend::Descriptor> d = frontend_.DescriptorIfDone(f.feature_id))  // else: a later frame
@@ -186,7 +186,6 @@ void VisualSlam::LoadMap(const io::MapFile& map) {
     keyframes.push_back(std::move(f));
   }
   system_.StartInMap(std::move(points), std::move(keyframes), map.camera);
-  map_loaded_ = true;
   frontend_.ReserveIdsBelow(next_id);
   was_lost_ = true;  // the first frame is relocalised
 }

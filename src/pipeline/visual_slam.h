@@ -197,7 +197,6 @@ class VisualSlam {
   // Every map point's look when it joined the map (its track's descriptor then): relocalisation's second look.
   std::unordered_map<int64_t, frontend::Descriptor> first_descriptors_;
   std::unordered_map<int64_t, frontend::Descriptor> track_looks_;  // KeepTrackLooks: this frame's new tracks
-  bool map_loaded_ = false;                                         // LoadMap: the run started in a map
   std::optional<Pose> latest_cam_from_world_;
   // Remapping's failed tries of each lost map point in view since it came into view (VisualSlamOptions'
   // remap_tries_every_frame), and the last frame in which it was lost and in view; only points in view now.

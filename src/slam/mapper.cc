@@ -186,7 +186,7 @@ int Mapper::TriangulateNewPoints(int slot, int inliers) {
   // loaded map, which is a place this run came back to: docs/map_format.md). Not on a provisional map: the rest of
   // the map is at another scale.
   std::vector<std::pair<int64_t, Eigen::Vector2d>> unseen;
-  if ((mo.merge_revisited_points || !s_.loaded_points.empty()) && !bridge_.active())
+  if (s_.MergesRevisits() && !bridge_.active())
     for (const MapPoint& p : s_.map.points()) {
       Eigen::Vector2d uv;
       if (p.state != PointState::kRemoved && !cur.Find(p.id) &&

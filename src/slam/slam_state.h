@@ -58,6 +58,9 @@ struct SlamState {
   int posed_from = -1;       // the first posed slot: the reference, or a frame before it (pose_frames_before_reference)
   int pruned_until = 0;      // frames before this slot have dropped their features (MappingOptions::history_frames)
 
+  // A place seen again may go on as its map points (Mapper::RevisitedPoint): MappingOptions::merge_revisited_points,
+  // and always in a loaded map.
+  bool MergesRevisits() const { return options.mapping.merge_revisited_points || !loaded_points.empty(); }
   // Active and lost map points.
   int MapPoints() const { return map.CountInState(PointState::kActive) + map.CountInState(PointState::kLost); }
   // The points this posed frame sees become active (seen now), those not seen lost.

@@ -339,6 +339,7 @@ void System::SetLookCheck(std::function<bool(int64_t track, int64_t point)> chec
   st_->state.same_look = std::move(check);
 }
 
+bool System::merges_revisits() const { return st_->state.MergesRevisits(); }
 bool System::initialised() const { return st_->state.initialised; }
 bool System::localised() const { return st_->state.last_posed_slot >= 0; }
 const Map& System::map() const { return st_->state.map; }

@@ -62,6 +62,8 @@ class System {
   // is where an unseen map point projects goes on as that point) is merged only where the two also look alike,
   // and those that do not are not counted among the candidates. Called from Process, on the thread that calls it.
   void SetLookCheck(std::function<bool(int64_t track, int64_t point)> check);
+  // Whether a place seen again may be merged into its map points now (merge_revisited_points, or a loaded map).
+  bool merges_revisits() const;
 
   // Starts in a map made before (a map file): its points and its keyframes (poses and features). Only before
   // the first frame; throws std::logic_error after one. The System is then initialised but not localised: a
