@@ -187,6 +187,11 @@ ImageJobOptions ImageOptionsFor(const RunArgs& a, const nlohmann::json* report) 
     if (im.is_object() && im.contains("pipelined") && im["pipelined"].is_boolean())
       image.pipelined = im["pipelined"].get<bool>();
   }
+  if (image.describe_map_points_only == defaults.describe_map_points_only) {
+    const nlohmann::json im = (*report)["options"].value("image", nlohmann::json::object());
+    if (im.is_object() && im.contains("describe_map_points_only") && im["describe_map_points_only"].is_boolean())
+      image.describe_map_points_only = im["describe_map_points_only"].get<bool>();
+  }
   return image;
 }
 

@@ -135,6 +135,9 @@ void AddImageJobFlags(CLI::App* cmd, ImageJobOptions* o) {
                 "Run each frame's front end on a thread of its own beside the back end of the frame before (the front "
                 "end then looks for lost points where the frame before the last placed them; slower on two cores: "
                 "docs/timing_pipelined.md)");
+  cmd->add_flag("--describe-map-points-only", o->describe_map_points_only,
+                "Front end: describe (SIFT) only the tracks that become map points, once they do, instead of every "
+                "new track at its birth (faster; off by default: docs/tuning.md)");
   cmd->add_option("--descriptor-refresh-frames", o->frontend.descriptor_refresh_frames,
                   "Front end: a track is described again once its descriptor is this many frames old, so that a lost "
                   "map point is matched with how it looked when last seen (0: birth descriptors only)")
@@ -300,6 +303,7 @@ void ImageRun::Setup(const slam::SystemOptions& system_in) {
   vs_opts.relocalise = options.relocalise;
   vs_opts.relocalise_turned = options.relocalise_turned;
   vs_opts.pipelined = options.pipelined;
+  vs_opts.describe_map_points_only = options.describe_map_points_only;
   fe_opts = vs_opts.frontend;
   vslam = std::make_unique<pipeline::VisualSlam>(camera, vs_opts, std::move(pose_kernel), std::move(point_kernel));
   if (options.gt_scale) {

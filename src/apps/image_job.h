@@ -38,6 +38,8 @@ struct ImageJobOptions {
   // --pipelined: the front end of each frame runs beside the back end of the frame before
   // (pipeline::VisualSlamOptions::pipelined).
   bool pipelined = false;
+  // --describe-map-points-only (pipeline::VisualSlamOptions::describe_map_points_only).
+  bool describe_map_points_only = false;
   // Map files (io/map_file.h): the map written at the end of the run; a map of an earlier run to start in
   // (relocalised against it, then extended, in its frame and scale).
   std::string save_map_path, load_map_path;

@@ -264,7 +264,8 @@ void ImageRun::WriteReport() {
   Stage decode, fe_convert, fe_pyramid, fe_track, fe_anchor, fe_detect, fe_remap, fe_describe, fe_wait, fe_total, be_track, be_map,
       be_adjust, be_adjust_points, be_local_ba, be_local_ba_wait, be_init, be_total, frame_total, reloc;
   int64_t remap_requests = 0, remapped = 0, remap_outside = 0, remap_no_candidate = 0, remap_no_match = 0,
-          remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0, described_for_remap = 0;
+          remap_over_budget = 0, remap_refused = 0, remap_deferred = 0, refreshed = 0, described_for_remap = 0,
+          described_listed = 0, detected = 0;
   double features_sum = 0;
   nlohmann::json skipped_frames = nlohmann::json::array();
   for (const FrameRow& row : rows) {
@@ -284,6 +285,7 @@ void ImageRun::WriteReport() {
     remap_no_match += row.fe.remap_no_match, remap_over_budget += row.fe.remap_over_budget;
     remap_refused += row.fe.remap_refused_id, remap_deferred += row.fe.remap_deferred;
     refreshed += row.fe.refreshed, described_for_remap += row.fe.described_for_remap;
+    described_listed += row.fe.described_listed, detected += row.fe.detected;
     be_total.Add(row.backend_ms);
     // The System reports the time of its failed initialisation attempts on 'waiting' reports, which the
     // initialisation then replaces; the wall time of Process before the map exists is that time, all of it.
@@ -341,6 +343,7 @@ void ImageRun::WriteReport() {
                            {"fps", options.fps},               {"gt_scale", options.gt_scale},
                            {"relocalise", options.relocalise}, {"relocalise_turned", options.relocalise_turned},
                            {"pipelined", options.pipelined},   {"max_megapixels", options.max_megapixels},
+                           {"describe_map_points_only", options.describe_map_points_only},
                            {"overlay", options.overlay_path},
                            {"plot", options.plot_path},        {"viewer", options.viewer}};
   if (!options.load_map_path.empty() || !options.save_map_path.empty()) {
@@ -376,7 +379,9 @@ void ImageRun::WriteReport() {
                    {"remap_over_budget", remap_over_budget},
                    {"remap_deferred", remap_deferred},
                    {"descriptors_refreshed", refreshed},
-                   {"new_tracks_described_for_remap", described_for_remap}};
+                   {"new_tracks_described_for_remap", described_for_remap},
+                   {"tracks_born", detected},
+                   {"described_as_map_points", described_listed}};
   {
     // tried: frames after a lost or skipped one; pose_found: PnP found a pose; tracked: ... and the frame's
     // pose step succeeded from it.

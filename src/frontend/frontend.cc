@@ -218,6 +218,47 @@ std::vector<std::optional<Descriptor>> Frontend::DescribeTurned(std::span<const 
   return out;
 }
 
+void Frontend::DescribeOnly(const std::function<bool(int64_t)>& wanted) {
+  Impl& m = *impl_;
+  m.describe_only = true;
+  m.listed.clear();
+  for (const Track& t : m.tracks)
+    if (wanted(t.id)) m.listed.insert(t.id);
+}
+
+void Frontend::DescribeEveryTrack() {
+  impl_->describe_only = false;
+  impl_->listed.clear();
+}
+
+int Frontend::DescribeMissing(std::span<const int64_t> ids) {
+  Impl& m = *impl_;
+  m.JoinDescription();
+  if (m.prev_pyramid.empty() || ids.empty()) return 0;
+  const std::unordered_set<int64_t> want(ids.begin(), ids.end());
+  std::vector<size_t> which;
+  std::vector<Look> looks;
+  for (size_t i = 0; i < m.tracks.size(); ++i)
+    if (!m.tracks[i].descriptor && want.count(m.tracks[i].id)) {
+      which.push_back(i);
+      looks.push_back(m.LookOf(m.tracks[i], m.prev_pyramid[0], m.tracks[i].uv));
+    }
+  if (which.empty()) return 0;
+  std::vector<Descriptor> d;
+  std::vector<char> ok;
+  DescribeLooks(m.describer, looks, &d, &ok);
+  int n = 0;
+  for (size_t k = 0; k < which.size(); ++k)
+    if (ok[k]) {
+      Track& t = m.tracks[which[k]];
+      t.descriptor = d[k];
+      t.described_at_age = looks[k].from_birth ? 0 : t.age;
+      t.birth_image.release();
+      ++n;
+    }
+  return n;
+}
+
 bool Frontend::Relabel(int64_t from, int64_t to, const std::optional<Descriptor>& descriptor) {
   Impl& m = *impl_;
   m.JoinDescription();
@@ -243,6 +284,7 @@ void Frontend::Reset() {
   impl_->prev_pyramid.clear();
   impl_->size = cv::Size();
   impl_->blurred_run = 0;
+  impl_->listed.clear();
 }
 
 size_t Frontend::NumTracks() const { return impl_->tracks.size(); }

@@ -49,6 +49,10 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   if ((budget <= 0 || !any_empty_cell) && requests.empty()) {  // no new corner: every deferred request waits
     st.remap_deferred = static_cast<int>(deferred.size());
     st.detect_ms = MsSince(t_detect);
+    // Nor are descriptors refreshed in such a frame; the listed tracks that have none are described all the same.
+    std::vector<size_t> to_describe;
+    AddListed(tracks.size(), &to_describe, &st);
+    StartDescription(gray, std::move(to_describe), &st);
     return;
   }
 
@@ -272,8 +276,11 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
     if (const auto d = descriptors.find(k); d != descriptors.end() && d->second) {
       t.descriptor = d->second;  // described_at_age: 0, its age now
       ++st.described_for_remap;
-    } else {
+    } else if (!describe_only) {
       to_describe.push_back(tracks.size());
+    } else {
+      t.birth_image = gray;  // described from it if listed soon (Track::birth_image)
+      t.birth_uv = t.uv;
     }
     tracks.push_back(std::move(t));
     ++st.detected;
@@ -283,11 +290,13 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   // Tracks whose descriptor is descriptor_refresh_frames old are described again where they are now, when the
   // whole descriptor window is inside the image: a map point that is lost and comes back (remapping,
   // relocalisation) is then matched with how it looked when it was last seen, not at its birth.
+  AddListed(n_carried, &to_describe, &st);
   if (o.descriptor_refresh_frames > 0) {
     const float margin = static_cast<float>(std::ceil(2.5 * 1.5 * o.descriptor_size_px));
     for (size_t i = 0; i < n_carried; ++i) {
       const Track& t = tracks[i];
       if (!t.descriptor || t.age - t.described_at_age < o.descriptor_refresh_frames) continue;
+      if (describe_only && !listed.count(t.id)) continue;
       if (t.uv.x < margin || t.uv.y < margin || t.uv.x > static_cast<float>(W - 1) - margin ||
           t.uv.y > static_cast<float>(H - 1) - margin)
         continue;

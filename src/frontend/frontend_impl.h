@@ -68,6 +68,11 @@ struct Track {
   bool remapped = false;
   std::optional<Descriptor> descriptor;
   int described_at_age = 0;  // the track's age when `descriptor` was taken
+  // Under Frontend::DescribeOnly a new track is not described at its birth; the frame it was born in is kept
+  // (shared by the tracks born in it) for BirthImageFrames, so that a track listed within them is described as it
+  // would have been at its birth: the same look, the same refresh schedule.
+  cv::Mat birth_image;
+  cv::Point2f birth_uv;
   // The patch the track was born with and the affine warp from patch offsets to image offsets found at the
   // last alignment (linear part only; the translation follows the track).
   AffinePatch anchor;
@@ -117,6 +122,36 @@ inline AffinePatch MonitorPatch(const cv::Mat& gray, const cv::Point2f& uv, cons
   return patch;
 }
 
+// Where a track is described: an image and a point in it; from_birth when that is its birth frame and position.
+struct Look {
+  cv::Mat image;
+  cv::Point2f uv;
+  bool from_birth = false;
+};
+
+// Describes each look (SiftDescriber::DescribeAll once per distinct image, in the order the images first come).
+inline void DescribeLooks(const SiftDescriber& d, const std::vector<Look>& looks, std::vector<Descriptor>* out,
+                          std::vector<char>* ok) {
+  out->assign(looks.size(), Descriptor{});
+  ok->assign(looks.size(), 0);
+  std::vector<char> done(looks.size(), 0);
+  std::vector<size_t> which;
+  std::vector<cv::Point2f> points;
+  std::vector<Descriptor> desc;
+  std::vector<char> desc_ok;
+  for (size_t first = 0; first < looks.size(); ++first) {
+    if (done[first]) continue;
+    which.clear(), points.clear();
+    for (size_t k = first; k < looks.size(); ++k)
+      if (!done[k] && looks[k].image.data == looks[first].image.data) {
+        which.push_back(k), points.push_back(looks[k].uv);
+        done[k] = 1;
+      }
+    d.DescribeAll(looks[first].image, points, &desc, &desc_ok);
+    for (size_t j = 0; j < which.size(); ++j) (*out)[which[j]] = desc[j], (*ok)[which[j]] = desc_ok[j];
+  }
+}
+
 struct Candidate {
   cv::Point2f uv;
   float response = 0;
@@ -141,6 +176,9 @@ struct Frontend::Impl {
   int64_t next_id = 0;
   cv::Size size;  // of the frames since the last Reset; empty before the first
   std::vector<cv::Mat> prev_pyramid;
+  // Frontend::DescribeOnly: only the tracks listed are described (none at birth); off: every new track at birth.
+  bool describe_only = false;
+  std::unordered_set<int64_t> listed;
   int blurred_run = 0;  // frames in a row whose patches were less sharp than their birth patches (TrackFeatures)
 
   // Description of the tracks born in the last frame (indices into `tracks`, which does not change until
@@ -150,6 +188,7 @@ struct Frontend::Impl {
   std::vector<size_t> pending_tracks;
   std::vector<Descriptor> pending_descriptors;
   std::vector<char> pending_ok;
+  std::vector<char> pending_from_birth;
   double pending_ms = 0;
 
   // Scratch kept between frames to avoid reallocating.
@@ -165,27 +204,42 @@ struct Frontend::Impl {
       if (pending_ok[k]) {
         Track& t = tracks[pending_tracks[k]];
         t.descriptor = pending_descriptors[k];
-        t.described_at_age = t.age;
+        t.described_at_age = pending_from_birth[k] ? 0 : t.age;
+        t.birth_image.release();
       }
     pending = false;
     pending_tracks.clear();
     return MsSince(t0);
   }
 
-  // Describes tracks[indices] from `gray`, now or on the task.
+  // Frames a new track's birth frame is kept for under DescribeOnly: the refresh period (a track listed later
+  // would have been described again since its birth by then, and is described where it is now instead).
+  int BirthImageFrames() const { return options.descriptor_refresh_frames > 0 ? options.descriptor_refresh_frames : 30; }
+
+  // Where tracks[i] is described: its birth frame while kept, else `current` at `uv`.
+  static Look LookOf(const Track& t, const cv::Mat& current, const cv::Point2f& uv) {
+    if (!t.birth_image.empty()) return {t.birth_image, t.birth_uv, true};
+    return {current, uv, false};
+  }
+
+  // Describes tracks[indices] (in `gray` where they are, or in their birth frames), now or on the task.
   void StartDescription(const cv::Mat& gray, std::vector<size_t> indices, FrameStats* stats) {
     if (indices.empty()) return;
-    std::vector<cv::Point2f> points;
-    points.reserve(indices.size());
-    for (size_t i : indices) points.push_back(tracks[i].uv);
+    std::vector<Look> looks;
+    looks.reserve(indices.size());
+    pending_from_birth.clear();
+    for (size_t i : indices) {
+      looks.push_back(LookOf(tracks[i], gray, tracks[i].uv));
+      pending_from_birth.push_back(looks.back().from_birth);
+    }
     pending_tracks = std::move(indices);
-    pending_descriptors.assign(points.size(), Descriptor{});
-    pending_ok.assign(points.size(), 0);
+    pending_descriptors.assign(looks.size(), Descriptor{});
+    pending_ok.assign(looks.size(), 0);
     pending = true;
-    auto work = [this, gray, points = std::move(points)](const SiftDescriber& d) {
+    auto work = [this, looks = std::move(looks)](const SiftDescriber& d) {
       const auto t0 = Clock::now();
       // A track without a descriptor simply cannot be remapped; nothing else changes.
-      d.DescribeAll(gray, points, &pending_descriptors, &pending_ok);
+      DescribeLooks(d, looks, &pending_descriptors, &pending_ok);
       pending_ms = MsSince(t0);
     };
     if (options.describe_async) {
@@ -195,6 +249,17 @@ struct Frontend::Impl {
       JoinDescription();
       stats->describe_ms = pending_ms;
     }
+  }
+
+  // Under DescribeOnly, the listed tracks among tracks[0, n) without a descriptor are described in this frame,
+  // where they are (as a new track would be at its birth); the tracks not listed are not refreshed either.
+  void AddListed(size_t n, std::vector<size_t>* to_describe, FrameStats* st) const {
+    if (!describe_only) return;
+    for (size_t i = 0; i < n; ++i)
+      if (!tracks[i].descriptor && listed.count(tracks[i].id)) {
+        to_describe->push_back(i);
+        ++st->described_listed;
+      }
   }
 
   // Median velocity of the tracks near `uv` (carried tracks only), with how sure it is.

@@ -278,6 +278,8 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
   std::vector<Track> kept;
   kept.reserve(n);
   double sum_pred = 0, sum_disp = 0;
+  std::vector<Look> lost_looks;
+  std::vector<size_t> lost_described;  // the entries of result->lost that lost_looks describe
   for (size_t i = 0; i < n; ++i) {
     Track& t = tracks[i];
     bool lost = true;
@@ -296,6 +298,13 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
     }
     if (lost) {
       result->lost.push_back({t.id, ToEigen(p0[i]), t.descriptor});
+      // Under DescribeOnly a map point's track can end before the frame that was to describe it (a track made a
+      // map point in the frame before, at 1 Hz or in a fast turn): it is described in its birth frame, or where it
+      // was last seen, so that it can be looked for again.
+      if (describe_only && !t.descriptor && listed.count(t.id)) {
+        lost_looks.push_back(LookOf(t, prev_pyramid[0], p0[i]));
+        lost_described.push_back(result->lost.size() - 1);
+      }
       continue;
     }
     sum_pred += cv::norm(p1[i] - start[i]);
@@ -314,10 +323,18 @@ void Frontend::Impl::TrackFeatures(const cv::Mat& gray, const std::vector<cv::Ma
       st.reanchored += !t.anchor.empty();
     }
     ++t.age;
+    if (!t.birth_image.empty() && t.age >= BirthImageFrames()) t.birth_image.release();
     t.remapped = false;
     kept.push_back(std::move(t));
   }
   tracks = std::move(kept);
+  if (!lost_looks.empty()) {
+    std::vector<Descriptor> d;
+    std::vector<char> ok;
+    DescribeLooks(describer, lost_looks, &d, &ok);
+    for (size_t k = 0; k < lost_looks.size(); ++k)
+      if (ok[k]) result->lost[lost_described[k]].descriptor = d[k], ++st.described_listed;
+  }
   if (st.anchored > 0) st.mean_anchor_shift_px = sum_shift / st.anchored;
   st.tracked = static_cast<int>(tracks.size());
   if (!tracks.empty()) {

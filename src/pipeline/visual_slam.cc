@@ -346,6 +346,18 @@ void VisualSlam::AfterBackend(const FrameObservations& obs, VisualSlamStep* step
   }
 }
 
+void VisualSlam::ChooseDescriptions() {
+  // While the map is lost, or a provisional map is tracked beside it, every frame's new tracks are what
+  // relocalisation matches: each is described at its birth, as where it came into view is how the map's points
+  // were last seen when they left it there (a camera that pans away and back).
+  if (!options_.describe_map_points_only || system_.merges_revisits() || was_lost_ || system_.bridging()) {
+    frontend_.DescribeEveryTrack();
+    return;
+  }
+  const slam::Map& map = system_.map();
+  frontend_.DescribeOnly([&map](int64_t id) { return !Removed(map.Find(id)); });
+}
+
 VisualSlamStep VisualSlam::Complete(InFlight frame) {
   AfterFrontend(frame.step.frontend, frame.requests);
   const FrameObservations obs = BeforeBackend(frame.after_gap, &frame.step);
@@ -359,6 +371,7 @@ VisualSlamStep VisualSlam::Process(const cv::Mat& image, int64_t index, double s
   InFlight frame;
   ++frames_processed_;
   frame.requests = RemapRequests();
+  ChooseDescriptions();
   frame.step.frontend = RunFrontend(image, index, stamp_s, frame.requests);
   frame.after_gap = std::exchange(after_gap_, false);
   return Complete(std::move(frame));
@@ -377,6 +390,7 @@ std::optional<VisualSlamStep> VisualSlam::Push(const cv::Mat& image, int64_t ind
   InFlight next;
   ++frames_processed_;
   next.requests = RemapRequests();  // as of the back end of the frame before the one in flight
+  ChooseDescriptions();             // the same
   next.after_gap = std::exchange(after_gap_, false);
   // The front end touches only the Frontend; the back end only the System and this object's remapping state.
   std::future<frontend::FrameResult> front = std::async(std::launch::async, [&] {
@@ -459,6 +473,12 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     return Candidate{&f, d, frontend::MatchDescriptor(d, looks, match_options)};
   };
   std::vector<slam::RelocalisationMatch> tracked;  // tracks that are map points: matched by their ids
+  if (map_side.size() >= 2) {  // the new tracks' looks (describe_map_points_only leaves them undescribed)
+    std::vector<int64_t> unmapped;
+    for (const frontend::TrackedFeature& f : fr.features)
+      if (Removed(system_.map().Find(f.feature_id))) unmapped.push_back(f.feature_id);
+    frontend_.DescribeMissing(unmapped);
+  }
   for (const frontend::TrackedFeature& f : fr.features) {
     if (!Removed(system_.map().Find(f.feature_id))) {
       tracked.push_back({f.feature_id, f.uv_px});

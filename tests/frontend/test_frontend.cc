@@ -435,6 +435,83 @@ TEST(Frontend, RefreshedDescriptorsFollowTheChangingLook) {
   EXPECT_LT(med_refreshed, 100.0);  // a match by remapping's test (250) with a wide margin
 }
 
+TEST(Frontend, DescribesOnlyTheTracksItIsToldTo) {
+  // Under DescribeOnly the new tracks go undescribed; a listed track is described in the next frame where it
+  // is, one whose track ends first is described where it was last seen, and DescribeMissing describes the
+  // others on demand. The texture only shifts, so each such look must be near the birth look that a front end
+  // describing every track took at the same point (the same texture: a match by remapping's cap of 250, with a
+  // wide margin; another point's look is ~500 away).
+  const MovingTexture tex(kSize, 33);
+  Frontend a, every;
+  a.DescribeOnly([](int64_t) { return true; });  // no live track yet: nothing listed
+  const FrameResult r0 = a.Process(tex.Frame(0, 0), 0, 0.0);
+  const FrameResult e0 = every.Process(tex.Frame(0, 0), 0, 0.0);
+  ASSERT_GE(r0.stats.detected, 40);
+  ASSERT_EQ(r0.stats.detected, e0.stats.detected);  // describing changes no track
+  for (const TrackedFeature& f : r0.features) EXPECT_FALSE(a.GetDescriptor(f.feature_id).has_value());
+  const auto near_birth_look = [&](int64_t id, const Descriptor& d) {
+    const std::optional<Descriptor> birth = every.DescriptorIfDone(id);
+    return birth && DescriptorDistance(*birth, d) < 150.0f;
+  };
+
+  a.DescribeOnly([](int64_t id) { return id % 2 == 0; });
+  const FrameResult r1 = a.Process(tex.Frame(3, 2), 1, 0.1);
+  every.Process(tex.Frame(3, 2), 1, 0.1);
+  int even = 0, near = 0;
+  for (const TrackedFeature& f : r1.features) {
+    if (f.age_frames == 0) continue;  // born in this frame
+    const std::optional<Descriptor> d = a.GetDescriptor(f.feature_id);
+    EXPECT_EQ(d.has_value(), f.feature_id % 2 == 0) << "id " << f.feature_id;
+    if (d) ++even, near += near_birth_look(f.feature_id, *d);
+  }
+  int even_lost = 0;  // listed tracks that ended in this frame: described where they were last seen
+  for (const LostTrack& l : r1.lost) {
+    EXPECT_EQ(l.descriptor.has_value(), l.feature_id % 2 == 0) << "id " << l.feature_id;
+    even_lost += l.descriptor.has_value();
+  }
+  EXPECT_EQ(r1.stats.described_listed, even + even_lost);
+  EXPECT_GE(even, 20);
+  EXPECT_GE(near, even * 9 / 10);
+
+  // The odd tracks are listed, and then every track ends (a blank frame): each ends with a look.
+  a.DescribeOnly([](int64_t) { return true; });
+  const cv::Mat blank(kSize, CV_8UC1, cv::Scalar(128));
+  const FrameResult r2 = a.Process(blank, 2, 0.2);
+  ASSERT_EQ(r2.lost.size(), r1.features.size());
+  int odd = 0, odd_near = 0;
+  for (const LostTrack& l : r2.lost) {
+    ASSERT_TRUE(l.descriptor.has_value()) << "id " << l.feature_id;
+    if (l.feature_id % 2 == 1 && Find(r1, l.feature_id)->age_frames > 0)
+      ++odd, odd_near += near_birth_look(l.feature_id, *l.descriptor);
+  }
+  EXPECT_GE(odd, 20);
+  EXPECT_GE(odd_near, odd * 9 / 10);
+
+  // On demand: the undescribed live tracks among those asked for, once; described ones are left as they are.
+  Frontend b;
+  b.DescribeOnly([](int64_t) { return false; });
+  const FrameResult b0 = b.Process(tex.Frame(0, 0), 0, 0.0);
+  std::vector<int64_t> ids;
+  for (const TrackedFeature& f : b0.features) ids.push_back(f.feature_id);
+  EXPECT_EQ(b.DescribeMissing(ids), static_cast<int>(ids.size()));
+  EXPECT_EQ(b.DescribeMissing(ids), 0);
+  int b_near = 0;
+  for (int64_t id : ids) b_near += near_birth_look(id, *b.GetDescriptor(id)) ? 1 : 0;
+  EXPECT_GE(b_near, static_cast<int>(ids.size()) * 9 / 10);
+
+  // And back: every new track is described at its birth again.
+  b.DescribeEveryTrack();
+  b.Process(tex.Frame(60, 40), 1, 0.1);
+  const FrameResult b2 = b.Process(tex.Frame(61, 41), 2, 0.2);
+  int born = 0;
+  for (const TrackedFeature& f : b2.features)
+    if (f.age_frames == 1) {
+      ++born;
+      EXPECT_TRUE(b.GetDescriptor(f.feature_id).has_value()) << "id " << f.feature_id;
+    }
+  EXPECT_GE(born, 5);
+}
+
 TEST(Frontend, AJoltOfTheWholeImageIsFollowedFromItsMeasuredShift) {
   // Steady motion, then one frame in which the image jumps: the constant-velocity predictions are all off by
   // the jump (45 px: beyond the 4-level retry). Jolt recovery retries the failed tracks from where the image's
