@@ -182,16 +182,14 @@ ImageJobOptions ImageOptionsFor(const RunArgs& a, const nlohmann::json* report) 
   if (image.relocalise_turned == defaults.relocalise_turned && reloc.is_object() && reloc.contains("turned") &&
       reloc["turned"].is_boolean())
     image.relocalise_turned = reloc["turned"].get<bool>();
-  if (image.pipelined == defaults.pipelined) {
-    const nlohmann::json im = (*report)["options"].value("image", nlohmann::json::object());
-    if (im.is_object() && im.contains("pipelined") && im["pipelined"].is_boolean())
-      image.pipelined = im["pipelined"].get<bool>();
-  }
-  if (image.describe_map_points_only == defaults.describe_map_points_only) {
-    const nlohmann::json im = (*report)["options"].value("image", nlohmann::json::object());
-    if (im.is_object() && im.contains("describe_map_points_only") && im["describe_map_points_only"].is_boolean())
-      image.describe_map_points_only = im["describe_map_points_only"].get<bool>();
-  }
+  // The report's image options, each where the command line left it at its default.
+  const nlohmann::json im = (*report)["options"].value("image", nlohmann::json::object());
+  const auto flag_from_report = [&im](const char* name, bool fallback, bool* value) {
+    if (*value == fallback && im.is_object() && im.contains(name) && im[name].is_boolean())
+      *value = im[name].get<bool>();
+  };
+  flag_from_report("pipelined", defaults.pipelined, &image.pipelined);
+  flag_from_report("describe_map_points_only", defaults.describe_map_points_only, &image.describe_map_points_only);
   return image;
 }
 

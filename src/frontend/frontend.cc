@@ -250,10 +250,7 @@ int Frontend::DescribeMissing(std::span<const int64_t> ids) {
   int n = 0;
   for (size_t k = 0; k < which.size(); ++k)
     if (ok[k]) {
-      Track& t = m.tracks[which[k]];
-      t.descriptor = d[k];
-      t.described_at_age = looks[k].from_birth ? 0 : t.age;
-      t.birth_image.release();
+      m.SetDescriptor(&m.tracks[which[k]], d[k], looks[k].from_birth);
       ++n;
     }
   return n;

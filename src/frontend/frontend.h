@@ -3,7 +3,8 @@
 // hold no tracked feature, every track is followed by pyramidal Lucas-Kanade started from its own
 // constant-velocity Kalman prediction and checked forward-backward, tracks get SIFT descriptors (each new
 // one at its birth, or only those the caller lists: DescribeOnly; optionally on a TBB task, while the caller
-// estimates the pose), and map points whose track was lost are re-attached (§6.4) when a new corner near their projection matches their descriptor.
+// estimates the pose), and map points whose track was lost are re-attached (§6.4) when a new corner near their
+// projection matches their descriptor.
 // It knows images and nothing of 3D; its output is feature id -> distorted pixel, per frame.
 #include <Eigen/Core>
 #include <array>
@@ -263,10 +264,12 @@ class Frontend {
 
   // Which tracks are described (SIFT, the looks remapping and relocalisation match). By default every new track at
   // its birth. After DescribeOnly(wanted), from the next Process on, only the live tracks for which `wanted` (called
-  // here, once per live track, on the caller's thread) said true: each in the next frame if it has no descriptor yet,
-  // and again every descriptor_refresh_frames; new tracks are not described at their birth (unless a remapping
-  // window described their corner anyway). The caller's map points are what it looks for again: most tracks never
-  // become one (KITTI 06: 1,344 of 6,223 tracks born). DescribeEveryTrack() goes back to the default.
+  // here, once per live track, on the caller's thread) said true: each in the next frame if it has no descriptor yet
+  // (from the frame it was born in while that is kept, Track::birth_image, else where it is; a listed track that
+  // ends first is described at its end), and again every descriptor_refresh_frames; new tracks are not described at
+  // their birth (unless a remapping window described their corner anyway). The caller's map points are what it
+  // looks for again: most tracks never become one (KITTI 06: ~1,300 of 6,223 tracks born). DescribeEveryTrack()
+  // goes back to the default.
   void DescribeOnly(const std::function<bool(int64_t)>& wanted);
   void DescribeEveryTrack();
   // The live tracks among `ids` that have no descriptor yet are described now, in the last frame (relocalisation

@@ -287,10 +287,11 @@ void Frontend::Impl::DetectAndRemap(const cv::Mat& gray, std::span<const RemapRe
   }
   st.remap_ms = requests.empty() ? 0.0 : MsSince(t_remap);
 
+  AddListed(n_carried, &to_describe, &st);
   // Tracks whose descriptor is descriptor_refresh_frames old are described again where they are now, when the
   // whole descriptor window is inside the image: a map point that is lost and comes back (remapping,
-  // relocalisation) is then matched with how it looked when it was last seen, not at its birth.
-  AddListed(n_carried, &to_describe, &st);
+  // relocalisation) is then matched with how it looked when it was last seen, not at its birth. Under DescribeOnly
+  // only the listed ones.
   if (o.descriptor_refresh_frames > 0) {
     const float margin = static_cast<float>(std::ceil(2.5 * 1.5 * o.descriptor_size_px));
     for (size_t i = 0; i < n_carried; ++i) {

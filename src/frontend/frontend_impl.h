@@ -201,15 +201,18 @@ struct Frontend::Impl {
     const auto t0 = Clock::now();
     task_group.wait();
     for (size_t k = 0; k < pending_tracks.size(); ++k)
-      if (pending_ok[k]) {
-        Track& t = tracks[pending_tracks[k]];
-        t.descriptor = pending_descriptors[k];
-        t.described_at_age = pending_from_birth[k] ? 0 : t.age;
-        t.birth_image.release();
-      }
+      if (pending_ok[k]) SetDescriptor(&tracks[pending_tracks[k]], pending_descriptors[k], pending_from_birth[k]);
     pending = false;
     pending_tracks.clear();
     return MsSince(t0);
+  }
+
+  // A track's descriptor, taken in its birth frame (from_birth: it dates from its birth, the refresh period counts
+  // from there) or now.
+  static void SetDescriptor(Track* t, const Descriptor& d, bool from_birth) {
+    t->descriptor = d;
+    t->described_at_age = from_birth ? 0 : t->age;
+    t->birth_image.release();
   }
 
   // Frames a new track's birth frame is kept for under DescribeOnly: the refresh period (a track listed later
@@ -251,8 +254,8 @@ struct Frontend::Impl {
     }
   }
 
-  // Under DescribeOnly, the listed tracks among tracks[0, n) without a descriptor are described in this frame,
-  // where they are (as a new track would be at its birth); the tracks not listed are not refreshed either.
+  // Under DescribeOnly, the listed tracks among tracks[0, n) without a descriptor are described in this frame (from
+  // their birth frames while kept, else where they are: LookOf).
   void AddListed(size_t n, std::vector<size_t>* to_describe, FrameStats* st) const {
     if (!describe_only) return;
     for (size_t i = 0; i < n; ++i)

@@ -473,7 +473,8 @@ void VisualSlam::Relocalise(const frontend::FrameResult& fr, FrameObservations* 
     return Candidate{&f, d, frontend::MatchDescriptor(d, looks, match_options)};
   };
   std::vector<slam::RelocalisationMatch> tracked;  // tracks that are map points: matched by their ids
-  if (map_side.size() >= 2) {  // the new tracks' looks (describe_map_points_only leaves them undescribed)
+  // The new tracks' looks, which describe_map_points_only leaves undescribed.
+  if (options_.describe_map_points_only && map_side.size() >= 2) {
     std::vector<int64_t> unmapped;
     for (const frontend::TrackedFeature& f : fr.features)
       if (Removed(system_.map().Find(f.feature_id))) unmapped.push_back(f.feature_id);

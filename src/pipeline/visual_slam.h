@@ -86,13 +86,13 @@ struct VisualSlamOptions {
   // Only the tracks that are map points are described (SIFT), each once it is one (from the frame it was born in,
   // while that is kept, Frontend::DescribeOnly) and again every FrontendOptions::descriptor_refresh_frames,
   // instead of every new track at its birth: what remapping looks for again is a lost map point's look, and most
-  // tracks never become one (KITTI 06: ~1,300 map points of 6,223 tracks born; its description 15.8 -> 3.6 ms a
-  // frame). Relocalisation describes the frame's other tracks when it needs them (Frontend::DescribeMissing). While
-  // the map is lost or a provisional map is tracked, and where a place seen again may be merged
-  // (System::merges_revisits: a loaded map), every new track is described at its birth all the same.
+  // tracks never become one (KITTI 06: ~1,300 map points of 6,223 tracks born; its description 16.0 -> 4.6 ms a
+  // frame, docs/timing_describe.md). Relocalisation describes the frame's other tracks when it needs them
+  // (Frontend::DescribeMissing). While the map is lost or a provisional map is tracked, and where a place seen again
+  // may be merged (System::merges_revisits: a loaded map), every new track is described at its birth all the same.
   // Off by default: the looks of points whose tracks were older than the refresh period when they became map points
   // differ from those taken every track at its birth, and the rendered rotation and sparse scenarios, which hang on
-  // single remaps, came out worse (docs/tuning.md: the robustness matrix 85 -> 82 of 100 cells on AVX2).
+  // single remaps, came out worse (docs/tuning.md: the robustness matrix 85 -> 83 of 100 cells on AVX2).
   bool describe_map_points_only = false;
   // Throws std::invalid_argument naming the field.
   void Check() const;
